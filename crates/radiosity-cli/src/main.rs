@@ -1,0 +1,50 @@
+//! `radiosity` — the command-line program. Only this crate prints, draws progress bars and
+//! picks exit codes; the work is done by the `radiosity` library.
+//!
+//! One file per subcommand; each parses raw flags (clap) and validates them into the
+//! library's settings before any work starts.
+
+mod common;
+mod compare;
+mod progress;
+mod render;
+mod solve;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Radiosity: diffuse global illumination by the finite-element method.
+#[derive(Parser)]
+#[command(name = "radiosity", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Solve a scene and render an image (PNG, optionally EXR) and a report.
+    Render(render::RenderArgs),
+    /// Solve a scene and write the report (per-object radiance, convergence, timings).
+    Solve(solve::SolveArgs),
+    /// Compare a rendered EXR with a reference EXR (relative RMSE, light-masked too).
+    Compare(compare::CompareArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    progress::install_ctrlc();
+    let result = match cli.command {
+        Command::Render(a) => render::run(a),
+        Command::Solve(a) => solve::run(a),
+        Command::Compare(a) => compare::run(a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

@@ -1,0 +1,81 @@
+//! Progress bars on stderr (indicatif) and the Ctrl-C stop flag.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Mutex;
+use std::time::Duration;
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use radiosity::Progress;
+
+/// Set by the first Ctrl-C; the library polls it and stops with what it has.
+pub static STOP: AtomicBool = AtomicBool::new(false);
+
+/// Installs the Ctrl-C handler: first press asks the work to stop (outputs are still
+/// written), a second press exits at once.
+pub fn install_ctrlc() {
+    let _ = ctrlc::set_handler(|| {
+        if STOP.swap(true, Ordering::SeqCst) {
+            eprintln!("\ninterrupted twice: exiting without writing outputs");
+            std::process::exit(130);
+        }
+        eprintln!("\ninterrupt: stopping and writing the result so far (Ctrl-C again to abort)");
+    });
+}
+
+/// True once Ctrl-C was pressed.
+pub fn stopped() -> bool {
+    STOP.load(Ordering::Relaxed)
+}
+
+/// Progress bars on stderr; silent when `quiet` or stderr is not a terminal (messages
+/// still print unless quiet).
+pub struct CliProgress {
+    bar: Mutex<Option<ProgressBar>>,
+    quiet: bool,
+}
+
+impl CliProgress {
+    /// A reporter.
+    pub fn new(quiet: bool) -> Self {
+        CliProgress { bar: Mutex::new(None), quiet }
+    }
+}
+
+impl Progress for CliProgress {
+    fn begin(&self, stage: &str, total: u64) {
+        if self.quiet {
+            return;
+        }
+        let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
+        bar.set_style(
+            ProgressStyle::with_template("{msg:>14} [{bar:40}] {pos}/{len} {elapsed_precise} (eta {eta})")
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
+        );
+        bar.set_message(stage.to_string());
+        bar.enable_steady_tick(Duration::from_millis(200));
+        *self.bar.lock().unwrap() = Some(bar);
+    }
+    fn advance(&self, n: u64) {
+        if let Some(b) = self.bar.lock().unwrap().as_ref() {
+            b.inc(n);
+        }
+    }
+    fn end(&self) {
+        if let Some(b) = self.bar.lock().unwrap().take() {
+            b.finish_and_clear();
+        }
+    }
+    fn message(&self, msg: &str) {
+        if self.quiet {
+            return;
+        }
+        match self.bar.lock().unwrap().as_ref() {
+            Some(b) => b.println(msg),
+            None => eprintln!("{msg}"),
+        }
+    }
+    fn should_stop(&self) -> bool {
+        stopped()
+    }
+}

@@ -1,0 +1,47 @@
+//! # radiosity
+//!
+//! The finite-element method for light transfer between diffuse surfaces. The data flows
+//! one way through the pipeline, one module per stage:
+//!
+//! ```text
+//! scene file ──scene::load──▶ SceneDesc ──Scene::from_desc──▶ Scene ──mesh──▶ Mesh ──▶ accel::Bvh
+//!   ──form_factor──▶ transport::Transport ──solve──▶ radiosity per element (+ SolveStats)
+//!   ──reconstruct──▶ radiosity per vertex ──render──▶ Image ──output──▶ PNG · EXR · report
+//! ```
+//!
+//! Units: linear radiometric quantities everywhere. Radiosity `B` (exitance) in W/m² (or
+//! the scene's own units) per RGB channel; an emitter's `Ke` is emitted **radiance** `L_e`,
+//! so its emitted exitance is `E = π·L_e`; an image pixel on a diffuse surface holds
+//! `L = B/π`. Tone mapping happens only in [`output`].
+//!
+//! The library never prints and never exits: errors are typed ([`Error`], with file:line for
+//! input errors), progress and cancellation go through [`progress::Progress`].
+#![warn(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod accel;
+pub mod error;
+pub mod form_factor;
+pub mod mesh;
+pub mod output;
+pub mod pipeline;
+pub mod progress;
+pub mod reconstruct;
+pub mod render;
+pub mod report;
+pub mod sampling;
+pub mod scene;
+pub mod solve;
+pub mod transport;
+
+pub use error::{Error, Location, Result, Warning};
+pub use progress::{NoProgress, Progress};
+
+/// A linear RGB triple (radiance, radiosity, reflectance ...); the unit is given where used.
+pub type Rgb = glam::DVec3;
+
+/// Luminance of a linear Rec.709/sRGB colour (used for picking shooters, metrics).
+#[inline]
+pub fn luminance(c: Rgb) -> f64 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}

@@ -1,0 +1,92 @@
+//! The JSON report: what was computed, how well, and how long it took.
+
+use serde::Serialize;
+
+use crate::form_factor;
+use crate::solve::SolveStats;
+
+/// Per-object result.
+#[derive(Clone, Debug, Serialize)]
+pub struct ObjectReport {
+    /// Object name (OBJ `o`/`g`, glTF node/mesh; `#k` for repeated names).
+    pub name: String,
+    /// Area in scene units².
+    pub area: f64,
+    /// Area-averaged radiosity B (exitance), RGB.
+    pub radiosity_rgb: [f64; 3],
+    /// Area-averaged outgoing radiance L = B/π, RGB.
+    pub radiance_rgb: [f64; 3],
+    /// Number of elements.
+    pub elements: usize,
+    /// Material names used.
+    pub materials: Vec<String>,
+}
+
+/// Seconds per pipeline stage.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Timings {
+    /// Reading and validating the scene.
+    pub load: f64,
+    /// Meshing.
+    pub mesh: f64,
+    /// Building the ray-casting hierarchy.
+    pub bvh: f64,
+    /// Form factors.
+    pub form_factors: f64,
+    /// Solving.
+    pub solve: f64,
+    /// Per-vertex reconstruction.
+    pub reconstruct: f64,
+    /// Rendering all images.
+    pub render: f64,
+    /// Whole run.
+    pub total: f64,
+}
+
+/// Energy bookkeeping (power = Σ A·B, per channel, scene units).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct EnergyReport {
+    /// Emitted power Σ A_i E_i.
+    pub emitted: [f64; 3],
+    /// Absorbed power Σ A_i (1−ρ_i)/ρ_i · (B_i − E_i) ... see `pipeline`.
+    pub absorbed: [f64; 3],
+    /// Power leaving through openings (open scenes).
+    pub escaped: [f64; 3],
+    /// Not yet distributed (unconverged part).
+    pub unaccounted: [f64; 3],
+}
+
+/// The whole report.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Report {
+    /// Program version.
+    pub version: String,
+    /// Scene name.
+    pub scene: String,
+    /// Input polygons after validation.
+    pub patches: usize,
+    /// Elements.
+    pub elements: usize,
+    /// Target element size (scene units).
+    pub mesh_size: f64,
+    /// Form-factor statistics.
+    pub form_factors: Option<form_factor::Stats>,
+    /// Solver statistics (iterations, residual, history).
+    pub solver: Option<SolveStats>,
+    /// Iterations done.
+    pub iterations: usize,
+    /// Final relative residual.
+    pub residual: f64,
+    /// Rays cast in all stages.
+    pub rays_cast: u64,
+    /// Energy balance.
+    pub energy: Option<EnergyReport>,
+    /// Seconds per stage.
+    pub timings: Timings,
+    /// Per object.
+    pub objects: Vec<ObjectReport>,
+    /// Images written.
+    pub images: Vec<String>,
+    /// Warnings.
+    pub warnings: Vec<String>,
+}

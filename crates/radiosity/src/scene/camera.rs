@@ -1,0 +1,100 @@
+//! Cameras as described in scene files and `camera.json`.
+//!
+//! Convention (PRODUCT.md): a pinhole at `position` looking at `look_at`, `up` roughly up,
+//! `vfov_deg` the full vertical field of view in degrees; image right = forward × up, so a
+//! right-handed scene seen with +Y up and looking along +Z has +X on the left (the Cornell
+//! box's red wall). Pixel (0,0) is top-left; pixel centres at +0.5.
+
+use std::path::Path;
+
+use glam::DVec3;
+use serde::Deserialize;
+
+use crate::{Error, Location, Result};
+
+/// A pinhole camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Eye position.
+    pub position: DVec3,
+    /// Point looked at.
+    pub look_at: DVec3,
+    /// Up direction (need not be orthogonal to the view direction).
+    pub up: DVec3,
+    /// Full vertical field of view in degrees.
+    pub vfov_deg: f64,
+}
+
+/// The JSON form (`../shared/scenes/cornell-box/camera.json`). Keys other than these four
+/// are descriptive (`aspect`, `units`, `model`, `source`, `width`, `height`, ...) and
+/// ignored.
+#[derive(Deserialize)]
+struct CameraJson {
+    position: [f64; 3],
+    look_at: [f64; 3],
+    up: [f64; 3],
+    vfov_deg: f64,
+}
+
+impl Camera {
+    /// Checks the camera is usable: finite, position ≠ look_at, up not parallel to the view,
+    /// 0 < fov < 180.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let finite = self.position.is_finite() && self.look_at.is_finite() && self.up.is_finite();
+        if !finite || !self.vfov_deg.is_finite() {
+            return Err("camera values must be finite numbers".into());
+        }
+        let fwd = self.look_at - self.position;
+        if fwd.length() <= 0.0 {
+            return Err("camera position and look_at coincide".into());
+        }
+        if fwd.normalize().cross(self.up).length() < 1e-9 {
+            return Err("camera up is parallel to the view direction (or zero)".into());
+        }
+        if !(self.vfov_deg > 0.0 && self.vfov_deg < 180.0) {
+            return Err(format!("vfov_deg must be between 0 and 180 degrees, got {}", self.vfov_deg));
+        }
+        Ok(())
+    }
+
+    /// Parses the JSON form; `file` names the source in errors.
+    pub fn from_json_str(text: &str, file: &Path) -> Result<Camera> {
+        let j: CameraJson = serde_json::from_str(text).map_err(|e| {
+            Error::Input {
+                loc: Location { file: file.into(), line: Some(e.line()), column: Some(e.column()) },
+                msg: format!("invalid camera JSON: {e}"),
+            }
+        })?;
+        let cam = Camera {
+            position: DVec3::from_array(j.position),
+            look_at: DVec3::from_array(j.look_at),
+            up: DVec3::from_array(j.up),
+            vfov_deg: j.vfov_deg,
+        };
+        cam.validate().map_err(|m| Error::input(Location::file(file), m))?;
+        Ok(cam)
+    }
+
+    /// Reads a camera JSON file.
+    pub fn load_json(path: &Path) -> Result<Camera> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Camera::from_json_str(&text, path)
+    }
+
+    /// A camera that frames a bounding box: looks at its centre from outside, along the
+    /// direction that sees the largest face, with a 45° field of view.
+    pub fn framing(lo: DVec3, hi: DVec3) -> Camera {
+        let center = 0.5 * (lo + hi);
+        let ext = (hi - lo).max(DVec3::splat(1e-9));
+        let radius = 0.5 * ext.length();
+        let vfov_deg: f64 = 45.0;
+        // Up: +Z for scenes that are flat in Z (architecture with z up), else +Y.
+        let up = if ext.z < ext.y * 0.9 && ext.z < ext.x * 0.9 { DVec3::Z } else { DVec3::Y };
+        // Look along +Z for y-up scenes (the Cornell convention) and along +Y for z-up
+        // scenes, from the negative side, slightly from above.
+        let horiz = if up == DVec3::Z { DVec3::Y } else { DVec3::Z };
+        let dir = (horiz - 0.25 * up).normalize();
+        let dist = radius / (0.5 * vfov_deg.to_radians()).tan() * 1.05;
+        Camera { position: center - dir * dist, look_at: center, up, vfov_deg }
+    }
+}

@@ -1,0 +1,255 @@
+//! Stage 1 of the pipeline: scenes.
+//!
+//! A scene file is read into a [`SceneDesc`] (plain description data: polygons as vertex
+//! lists, materials, named objects, an optional camera, each with the place in the file it
+//! came from). [`Scene::from_desc`] validates it into a [`Scene`]: non-physical values
+//! (reflectance outside [0,1), negative or non-finite emission, NaN coordinates) are errors
+//! naming file and line; degenerate polygons are skipped with a warning; non-planar polygons
+//! are split into triangles the way path tracers do (v0,vi,vi+1); concave polygons are
+//! triangulated by ear clipping; two-sided materials get a back-facing copy of each polygon
+//! (radiosity is per side).
+//!
+//! Formats: OBJ + MTL ([`obj`]), glTF 2.0 ([`gltf`]), a TOML scene file ([`toml_file`]),
+//! and the built-in scenes ([`builtin`]).
+
+pub mod builtin;
+pub mod camera;
+pub mod gltf;
+pub mod obj;
+pub mod toml_file;
+mod validate;
+
+use std::path::Path;
+
+use glam::DVec3;
+
+pub use camera::Camera;
+
+use crate::{Error, Location, Result, Rgb, Warning};
+
+/// A material as written in the input.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MaterialDesc {
+    /// Name (MTL `newmtl`, glTF material name).
+    pub name: String,
+    /// Diffuse reflectance ρ per channel, linear; must lie in [0, 1).
+    pub reflectance: Rgb,
+    /// Emitted radiance L_e per channel (MTL `Ke`); exitance is π·L_e.
+    pub emission: Rgb,
+    /// Both sides of surfaces with this material reflect (and emit).
+    pub two_sided: bool,
+    /// Where it was defined.
+    pub loc: Option<Location>,
+}
+
+impl MaterialDesc {
+    /// A non-emitting material.
+    pub fn diffuse(name: &str, reflectance: Rgb) -> Self {
+        MaterialDesc { name: name.into(), reflectance, emission: Rgb::ZERO, two_sided: false, loc: None }
+    }
+}
+
+/// A named group of polygons (OBJ `o`/`g`, glTF node/mesh); the unit of the report.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObjectDesc {
+    /// Name as written (repeated names are made unique by [`Scene::from_desc`]).
+    pub name: String,
+    /// Where it starts.
+    pub loc: Option<Location>,
+}
+
+/// One planar polygon as written: vertices in order, front side by the right-hand rule.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PolygonDesc {
+    /// Vertex positions in scene units.
+    pub vertices: Vec<DVec3>,
+    /// Index into [`SceneDesc::materials`].
+    pub material: u32,
+    /// Index into [`SceneDesc::objects`].
+    pub object: u32,
+    /// Where it was defined (OBJ `f` line).
+    pub loc: Option<Location>,
+}
+
+/// A scene as read from a file, before validation.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SceneDesc {
+    /// A short name (file stem or built-in name).
+    pub name: String,
+    /// Materials.
+    pub materials: Vec<MaterialDesc>,
+    /// Objects.
+    pub objects: Vec<ObjectDesc>,
+    /// Polygons.
+    pub polygons: Vec<PolygonDesc>,
+    /// The scene's own camera, if it has one.
+    pub camera: Option<Camera>,
+    /// Treat every surface as two-sided.
+    pub two_sided: bool,
+    /// Warnings met while reading.
+    pub warnings: Vec<Warning>,
+}
+
+/// A validated material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Name.
+    pub name: String,
+    /// Diffuse reflectance ρ in [0,1) per channel.
+    pub reflectance: Rgb,
+    /// Emitted radiance L_e per channel (W/(m²·sr) or scene units).
+    pub emission: Rgb,
+    /// Whether surfaces with it are two-sided (already expanded into polygons).
+    pub two_sided: bool,
+}
+
+impl Material {
+    /// Emitted exitance E = π·L_e.
+    pub fn exitance(&self) -> Rgb {
+        self.emission * std::f64::consts::PI
+    }
+    /// True if it emits light.
+    pub fn is_emitter(&self) -> bool {
+        self.emission.max_element() > 0.0
+    }
+}
+
+/// A validated object: a name unique within the scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Object {
+    /// Unique name (a repeated input name gets `#k`, k-th occurrence in file order).
+    pub name: String,
+}
+
+/// A validated polygon: planar, convex, at least 3 vertices, non-zero area.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Polygon {
+    /// Vertices, counter-clockwise about `normal`.
+    pub vertices: Vec<DVec3>,
+    /// Unit normal of the front side.
+    pub normal: DVec3,
+    /// Area in scene units².
+    pub area: f64,
+    /// Material index.
+    pub material: u32,
+    /// Object index.
+    pub object: u32,
+    /// True for the generated back side of a two-sided input polygon.
+    pub back_side: bool,
+}
+
+impl Polygon {
+    /// Area-weighted centroid.
+    pub fn centroid(&self) -> DVec3 {
+        polygon_centroid(&self.vertices)
+    }
+}
+
+/// A validated scene, ready for meshing.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// Short name.
+    pub name: String,
+    /// Materials.
+    pub materials: Vec<Material>,
+    /// Objects (report units).
+    pub objects: Vec<Object>,
+    /// Planar convex polygons.
+    pub polygons: Vec<Polygon>,
+    /// The scene's camera, if any.
+    pub camera: Option<Camera>,
+    /// Warnings from reading and validation (skipped geometry, defaults used).
+    pub warnings: Vec<Warning>,
+}
+
+impl Scene {
+    /// Validates a description (see the module docs for the rules).
+    pub fn from_desc(desc: SceneDesc) -> Result<Scene> {
+        validate::validate(desc)
+    }
+
+    /// Axis-aligned bounds (min, max) of all polygons.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for p in &self.polygons {
+            for v in &p.vertices {
+                lo = lo.min(*v);
+                hi = hi.max(*v);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Length of the bounding-box diagonal (the scene's size).
+    pub fn diagonal(&self) -> f64 {
+        let (lo, hi) = self.bounds();
+        if lo.x > hi.x {
+            0.0
+        } else {
+            (hi - lo).length()
+        }
+    }
+
+    /// Total surface area.
+    pub fn total_area(&self) -> f64 {
+        self.polygons.iter().map(|p| p.area).sum()
+    }
+}
+
+/// Reads a scene: a built-in name (`cornell`, `furnace`) or a file (`.obj`, `.gltf`, `.glb`,
+/// `.toml`, `.vs3`), chosen by extension.
+pub fn load(spec: &str) -> Result<SceneDesc> {
+    if let Some(desc) = builtin::by_name(spec) {
+        return Ok(desc);
+    }
+    let path = Path::new(spec);
+    if !path.exists() {
+        let names = builtin::NAMES.join(", ");
+        return Err(Error::Invalid(format!(
+            "{spec}: no such file (and not a built-in scene; built-in scenes are: {names})"
+        )));
+    }
+    let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).unwrap_or_default();
+    match ext.as_str() {
+        "obj" => obj::load_obj(path),
+        "gltf" | "glb" => gltf::load_gltf(path),
+        "toml" => toml_file::load_toml(path),
+        other => Err(Error::input(
+            Location::file(path),
+            format!("unknown scene format '.{other}' (expected .obj, .gltf, .glb or .toml)"),
+        )),
+    }
+}
+
+/// Reads and validates a scene in one step.
+pub fn load_scene(spec: &str) -> Result<Scene> {
+    Scene::from_desc(load(spec)?)
+}
+
+/// Newell's normal (not normalised; length = 2·area for a planar polygon).
+pub fn newell_normal(v: &[DVec3]) -> DVec3 {
+    let mut n = DVec3::ZERO;
+    let c = v[0];
+    for i in 1..v.len().saturating_sub(1) {
+        n += (v[i] - c).cross(v[i + 1] - c);
+    }
+    n
+}
+
+/// Area-weighted centroid of a planar polygon (fan decomposition).
+pub fn polygon_centroid(v: &[DVec3]) -> DVec3 {
+    let c0 = v[0];
+    let mut acc = DVec3::ZERO;
+    let mut wsum = 0.0;
+    for i in 1..v.len() - 1 {
+        let w = (v[i] - c0).cross(v[i + 1] - c0).length();
+        acc += w * (c0 + v[i] + v[i + 1]) / 3.0;
+        wsum += w;
+    }
+    if wsum > 0.0 {
+        acc / wsum
+    } else {
+        v.iter().copied().sum::<DVec3>() / v.len() as f64
+    }
+}
