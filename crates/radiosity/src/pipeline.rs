@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use crate::accel::SceneRays;
 use crate::form_factor;
-use crate::mesh::{self, Mesh};
+use crate::mesh::{self, Mesh, Receivers};
 use crate::reconstruct;
 use crate::render::gouraud::{self, ElementTracer};
 use crate::render::{Image, PinholeCamera};
@@ -48,6 +48,8 @@ pub struct Solved {
     pub mesh: Mesh,
     /// Ray casting against the scene's polygons.
     pub rays: SceneRays,
+    /// Receiver points and open (uncovered) fraction of every element.
+    pub receivers: Receivers,
     /// The form-factor rows.
     pub transport: SparseRows,
     /// Form-factor statistics.
@@ -84,12 +86,15 @@ pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -
     timings.bvh = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let (transport, ff_stats) = form_factor::compute(&scene, &mesh, &rays, &settings.form_factors, progress)?;
+    let receivers = Receivers::compute(&scene, &mesh, &rays);
+    let (transport, mut ff_stats) =
+        form_factor::compute(&scene, &mesh, &rays, &receivers, &settings.form_factors, progress)?;
+    ff_stats.rays += receivers.rays;
     timings.form_factors = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let (rho, emission) = element_materials(&scene, &mesh);
-    let area: Vec<f64> = mesh.elements.iter().map(|e| e.area).collect();
+    let area = receivers.open_areas(&mesh);
     let system = System { transport: &transport, reflectance: &rho, emission: &emission, area: &area };
     let solution = solve::solve(settings.solver, &system, &settings.solve, progress)?;
     timings.solve = t.elapsed().as_secs_f64();
@@ -97,13 +102,13 @@ pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -
     let t = Instant::now();
     let vertex_radiosity = reconstruct::vertex_radiosity(&scene, &mesh, &solution.display_radiosity());
     timings.reconstruct = t.elapsed().as_secs_f64();
-    Ok(Solved { scene, mesh, rays, transport, ff_stats, solution, vertex_radiosity, timings })
+    Ok(Solved { scene, mesh, rays, receivers, transport, ff_stats, solution, vertex_radiosity, timings })
 }
 
 impl Solved {
     /// Per-object area-averaged radiosity and radiance.
     pub fn objects(&self) -> Vec<ObjectReport> {
-        let means = reconstruct::object_means(&self.scene, &self.mesh, &self.solution.radiosity);
+        let means = reconstruct::object_means(&self.scene, &self.mesh, &self.solution.radiosity, &self.receivers.open_fraction);
         let mut counts = vec![0usize; self.scene.objects.len()];
         let mut mats: Vec<Vec<String>> = vec![Vec::new(); self.scene.objects.len()];
         for e in &self.mesh.elements {
@@ -142,12 +147,14 @@ impl Solved {
         let mut absorbed = Rgb::ZERO;
         let mut leaving = Rgb::ZERO;
         let mut arriving = Rgb::ZERO;
-        for (i, e) in self.mesh.elements.iter().enumerate() {
-            emitted += emission[i] * e.area;
+        let area = self.receivers.open_areas(&self.mesh);
+        for i in 0..self.mesh.len() {
+            let a = area[i];
+            emitted += emission[i] * a;
             // Irradiance H_i = Σ_j F_ij B_j (gather form); absorbed = A (1−ρ) H.
-            absorbed += (Rgb::ONE - rho[i]) * fb[i] * e.area;
-            leaving += b[i] * e.area;
-            arriving += fb[i] * e.area;
+            absorbed += (Rgb::ONE - rho[i]) * fb[i] * a;
+            leaving += b[i] * a;
+            arriving += fb[i] * a;
         }
         // Power that leaves surfaces but never arrives anywhere escapes through openings.
         let escaped = leaving - arriving;

@@ -20,7 +20,7 @@ use std::str::FromStr;
 use std::time::Instant;
 
 use crate::accel::SceneRays;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, Receivers};
 use crate::scene::Scene;
 use crate::transport::SparseRows;
 use crate::{Error, Progress, Result};
@@ -64,7 +64,8 @@ pub struct Options {
     pub seed: u64,
     /// Visibility rays per receiver point, as `n × n` stratified points on the source.
     pub visibility_samples: usize,
-    /// Largest number of receiver points per side (`n × n`), used for close pairs.
+    /// Largest number of receiver points per side (`n × n`, at most
+    /// [`crate::mesh::coverage::MAX_K`]), used for close pairs.
     pub max_receiver_samples: usize,
 }
 
@@ -92,12 +93,13 @@ pub fn compute(
     scene: &Scene,
     mesh: &Mesh,
     rays: &SceneRays,
+    receivers: &Receivers,
     opts: &Options,
     progress: &dyn Progress,
 ) -> Result<(SparseRows, Stats)> {
     let t0 = Instant::now();
     let (rows, nrays) = match opts.method {
-        Method::PointSampled => point_sampled::compute(scene, mesh, rays, opts, progress)?,
+        Method::PointSampled => point_sampled::compute(scene, mesh, rays, receivers, opts, progress)?,
     };
     let stats = Stats {
         method: opts.method.name().to_string(),

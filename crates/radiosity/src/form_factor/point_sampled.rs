@@ -5,8 +5,10 @@
 //! F_ij ≈ 1/m · Σ_{s=1..m} F(dA_{x_s} → A_j) · V̂(x_s, A_j)
 //! ```
 //!
-//! `x_s` are `m = k×k` stratified points on the receiver `i` (k grows as the pair gets
-//! closer: 1 when the distance exceeds four element sizes, up to `max_receiver_samples`);
+//! `x_s` are the open points of a fixed `k×k` grid on the receiver `i` (k grows as the
+//! pair gets closer: 1 when the distance exceeds four element sizes, up to
+//! `max_receiver_samples`; points inside closed geometry are excluded, see
+//! [`crate::mesh::coverage`]);
 //! `F(dA → A_j)` is the exact contour integral ([`super::kernel`]); `V̂` is the fraction of
 //! `visibility_samples²` rays from `x_s` to stratified points of `j` that reach it. Rows of
 //! a closed, unoccluded enclosure sum to one exactly (up to rounding), which is what the
@@ -21,7 +23,7 @@ use rayon::prelude::*;
 use super::kernel::point_to_polygon;
 use super::Options;
 use crate::accel::SceneRays;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, Receivers};
 use crate::sampling::{rng_for, stratified};
 use crate::scene::Scene;
 use crate::transport::SparseRows;
@@ -31,6 +33,7 @@ pub(super) fn compute(
     scene: &Scene,
     mesh: &Mesh,
     rays: &SceneRays,
+    receivers: &Receivers,
     opts: &Options,
     progress: &dyn Progress,
 ) -> Result<(SparseRows, u64)> {
@@ -47,8 +50,8 @@ pub(super) fn compute(
         .into_par_iter()
         .with_min_len(4)
         .map_init(
-            || (Vec::new(), Vec::new(), Vec::new(), u32::MAX, Vec::<u32>::new()),
-            |(recv_pts, vis_pts, row, cached_patch, patch_list), i| {
+            || (Vec::new(), Vec::new(), u32::MAX, Vec::<u32>::new()),
+            |(vis_pts, row, cached_patch, patch_list), i| {
                 if stopped.load(Ordering::Relaxed) {
                     return Vec::new();
                 }
@@ -81,6 +84,40 @@ pub(super) fn compute(
                 let size_i = ei.area.sqrt();
                 let mut nrays = 0u64;
                 row.clear();
+                let Some(&c1) = receivers.points(i, 1).first() else {
+                    progress.advance(1);
+                    return Vec::new(); // entirely covered: receives nothing
+                };
+                let kv = opts.visibility_samples.max(1);
+                // Visible fraction of element j seen from x (kv² stratified rays).
+                let mut visibility = |x: DVec3, j: u32, q: u32, rng: &mut crate::sampling::Rng, nrays: &mut u64| {
+                    let ej = &mesh.elements[j as usize];
+                    stratified(kv, rng, vis_pts);
+                    let mut seen = 0u32;
+                    let mut tried = 0u32;
+                    for &(a, b) in vis_pts.iter() {
+                        let y = ej.point(&mesh.positions, a, b);
+                        if ei.normal.dot(y - x) <= 0.0 {
+                            continue;
+                        }
+                        tried += 1;
+                        if rays.visible(x, pi, y, q) {
+                            seen += 1;
+                        }
+                    }
+                    *nrays += tried as u64;
+                    if tried == 0 {
+                        1.0
+                    } else {
+                        seen as f64 / tried as f64
+                    }
+                };
+                // Near pairs get k×k receiver points; far pairs the single point c1. The
+                // extra exchange D that the finer sets find with near neighbours is taken
+                // from the far field (scale α), so each row sums exactly to the unoccluded
+                // total seen from c1 — one in a closed room (the furnace test).
+                let mut near_excess = 0.0;
+                let mut far_sum = 0.0;
                 for &q in patch_list.iter() {
                     let pe = mesh.patches[q as usize];
                     for j in pe.first..pe.first + pe.count {
@@ -102,44 +139,49 @@ pub(super) fn compute(
                             opts.max_receiver_samples.max(1)
                         }
                         .min(opts.max_receiver_samples.max(1));
-                        stratified(k, &mut rng, recv_pts);
-                        let kv = opts.visibility_samples.max(1);
+                        let f1 = point_to_polygon(c1, ei.normal, cj, ej.normal);
+                        let recv_pts = receivers.points(i, k);
+                        if k == 1 || recv_pts.len() <= 1 {
+                            if f1 > 0.0 {
+                                far_sum += f1;
+                                let v = visibility(c1, j, q, &mut rng, &mut nrays);
+                                row.push((j, f1 * v, true));
+                            }
+                            continue;
+                        }
                         let mut sum = 0.0;
-                        for &(u, v) in recv_pts.iter() {
-                            let x = ei.point(&mesh.positions, u, v);
+                        let mut unocc = 0.0;
+                        for &x in recv_pts.iter() {
                             let f = point_to_polygon(x, ei.normal, cj, ej.normal);
                             if f <= 0.0 {
                                 continue;
                             }
-                            stratified(kv, &mut rng, vis_pts);
-                            let mut seen = 0u32;
-                            let mut tried = 0u32;
-                            for &(a, b) in vis_pts.iter() {
-                                let y = ej.point(&mesh.positions, a, b);
-                                if ei.normal.dot(y - x) <= 0.0 {
-                                    continue;
-                                }
-                                tried += 1;
-                                if rays.visible(x, pi, y, q) {
-                                    seen += 1;
-                                }
-                            }
-                            nrays += tried as u64;
-                            let vis = if tried == 0 { 1.0 } else { seen as f64 / tried as f64 };
-                            sum += f * vis;
+                            unocc += f;
+                            sum += f * visibility(x, j, q, &mut rng, &mut nrays);
                         }
-                        let fij = sum / recv_pts.len() as f64;
-                        if fij > 0.0 {
-                            row.push((j, fij as f32));
+                        let m = recv_pts.len() as f64;
+                        near_excess += unocc / m - f1;
+                        if sum > 0.0 {
+                            row.push((j, sum / m, false));
                         }
                     }
                 }
+                let mut alpha = if far_sum > 0.0 { (1.0 - near_excess / far_sum).clamp(0.5, 1.5) } else { 1.0 };
+                // With occlusion the correction is estimated from unoccluded values; never let
+                // it push a row above one (no point sees more than its hemisphere).
+                let (near_vis, far_vis) = row.iter().fold((0.0, 0.0), |(n, f), &(_, v, far)| if far { (n, f + v) } else { (n + v, f) });
+                if near_vis + alpha * far_vis > 1.0 && far_vis > 0.0 {
+                    alpha = ((1.0 - near_vis) / far_vis).max(0.0);
+                }
+                let mut out: Vec<(u32, f32)> = row
+                    .iter()
+                    .map(|&(j, f, far)| (j, if far { f * alpha } else { f } as f32))
+                    .filter(|e| e.1 > 0.0)
+                    .collect();
                 ray_count.fetch_add(nrays, Ordering::Relaxed);
                 progress.advance(1);
-                let mut r = std::mem::take(row);
-                r.sort_unstable_by_key(|e| e.0);
-                r.shrink_to_fit();
-                r
+                out.sort_unstable_by_key(|e| e.0);
+                out
             },
         )
         .collect();

@@ -9,10 +9,12 @@
 //!
 //! The target element size is in scene units; [`default_size`] scales with the scene.
 
+pub mod coverage;
 mod uniform;
 
 use glam::DVec3;
 
+pub use coverage::Receivers;
 pub use uniform::mesh_uniform;
 
 use crate::scene::Scene;

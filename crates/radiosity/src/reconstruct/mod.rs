@@ -65,13 +65,15 @@ fn quantize_normal(n: DVec3) -> [i32; 3] {
     [(n.x * s).round() as i32, (n.y * s).round() as i32, (n.z * s).round() as i32]
 }
 
-/// Area-weighted mean radiosity per object and the object's area.
-pub fn object_means(scene: &Scene, mesh: &Mesh, element_b: &[Rgb]) -> Vec<(f64, Rgb)> {
+/// Area-weighted mean radiosity per object and the object's area. `open_fraction` is the
+/// uncovered share of each element: covered area counts as zero radiosity (the convention
+/// of the path-traced references), but still counts in the object's area.
+pub fn object_means(scene: &Scene, mesh: &Mesh, element_b: &[Rgb], open_fraction: &[f64]) -> Vec<(f64, Rgb)> {
     let mut acc = vec![(0.0, Rgb::ZERO); scene.objects.len()];
     for (ei, e) in mesh.elements.iter().enumerate() {
         let o = scene.polygons[e.patch as usize].object as usize;
         acc[o].0 += e.area;
-        acc[o].1 += element_b[ei] * e.area;
+        acc[o].1 += element_b[ei] * (e.area * open_fraction[ei]);
     }
     acc.into_iter().map(|(a, s)| (a, if a > 0.0 { s / a } else { Rgb::ZERO })).collect()
 }
