@@ -17,14 +17,14 @@ pub struct SolveFlags {
     /// Scene: a file (.obj, .gltf, .glb, .toml) or a built-in name (cornell, furnace).
     #[arg(default_value = "cornell")]
     pub scene: String,
-    /// Target element size in scene units [default: scene diagonal / 40].
+    /// Target element size in scene units [default: scene diagonal / 32].
     #[arg(long, value_name = "S")]
     pub mesh_size: Option<f64>,
     /// Form-factor method.
     #[arg(long = "form-factors", value_name = "METHOD", default_value = "point-sampled")]
     pub form_factors: String,
     /// Visibility rays per receiver point (n × n).
-    #[arg(long, value_name = "N", default_value_t = 2)]
+    #[arg(long, value_name = "N", default_value_t = 1)]
     pub visibility_samples: usize,
     /// Solver.
     #[arg(long, value_name = "NAME", default_value = "jacobi")]

@@ -9,6 +9,7 @@ use clap::Args;
 use glam::DVec3;
 use radiosity::output;
 use radiosity::pipeline::solve_scene;
+use radiosity::render::gather;
 use radiosity::render::gouraud::{self, ElementTracer, Shading};
 use radiosity::scene::Camera;
 
@@ -48,11 +49,16 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 512)]
     pub height: usize,
     /// Samples per pixel along each axis (box filter).
-    #[arg(long, value_name = "N", default_value_t = 3)]
+    #[arg(long, value_name = "N", default_value_t = 4)]
     pub spp: usize,
-    /// Shading: gouraud (interpolated from vertices) or flat (one value per element).
-    #[arg(long, value_name = "MODE", default_value = "gouraud")]
-    pub shading: String,
+    /// Image reconstruction: gather (direct light per pixel, indirect from the solution;
+    /// matches a path tracer), gouraud (radiosity interpolated from vertices; instant
+    /// preview) or flat (one value per element).
+    #[arg(long = "render", value_name = "MODE", default_value = "gather")]
+    pub mode: String,
+    /// Final gather: shadow rays per pixel sample and emitter, as N × N.
+    #[arg(long, value_name = "N", default_value_t = 2)]
+    pub shadow_rays: usize,
     /// PNG exposure: radiance is multiplied by this before sRGB encoding [default: automatic].
     #[arg(long, value_name = "SCALE")]
     pub exposure: Option<f64>,
@@ -79,11 +85,15 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     if a.spp == 0 || a.spp > 64 {
         bail!("--spp must be between 1 and 64");
     }
-    let shading = match a.shading.as_str() {
-        "gouraud" => Shading::Gouraud,
+    let shading = match a.mode.as_str() {
+        "gouraud" | "gather" => Shading::Gouraud,
         "flat" => Shading::Flat,
-        s => bail!("unknown --shading '{s}' (known: gouraud, flat)"),
+        s => bail!("unknown --render '{s}' (known: gather, gouraud, flat)"),
     };
+    let gather = a.mode == "gather";
+    if a.shadow_rays == 0 || a.shadow_rays > 16 {
+        bail!("--shadow-rays must be between 1 and 16");
+    }
     if let Some(e) = a.exposure {
         if !(e.is_finite() && e > 0.0) {
             bail!("--exposure must be a positive number");
@@ -134,10 +144,26 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let opts = gouraud::Options { width: a.width, height: a.height, spp_axis: a.spp, shading };
     // The image is drawn even after an interrupt: the solution so far is what we have.
     let quiet = CliProgress::new(a.solve.quiet);
-    let img = solved.render(&cam, &opts, &tracer, &NeverStop(&quiet));
+    let mut render_rays = 0;
+    let img = if gather {
+        let (_, hv) = solved.indirect_irradiance();
+        let gopts = gather::Options {
+            width: a.width,
+            height: a.height,
+            spp_axis: a.spp,
+            shadow_axis: a.shadow_rays,
+            seed: a.solve.seed,
+        };
+        let (img, r) = solved.render_gather(&cam, &gopts, &tracer, &hv, &NeverStop(&quiet));
+        render_rays = r;
+        img
+    } else {
+        solved.render(&cam, &opts, &tracer, &NeverStop(&quiet))
+    };
     let render_s = t.elapsed().as_secs_f64();
 
     let mut report = solved.report();
+    report.rays_cast += render_rays;
     report.timings.load = load_s;
     report.timings.render = render_s;
     write_atomic(&out_png, &output::png::encode(&img, a.exposure)?)?;

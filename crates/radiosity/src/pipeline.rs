@@ -9,6 +9,7 @@ use crate::form_factor;
 use crate::mesh::{self, Mesh, Receivers};
 use crate::reconstruct;
 use crate::render::gouraud::{self, ElementTracer};
+use crate::render::gather;
 use crate::render::{Image, PinholeCamera};
 use crate::report::{EnergyReport, ObjectReport, Report, Timings};
 use crate::scene::{Camera, Scene};
@@ -165,6 +166,33 @@ impl Solved {
             escaped: escaped.to_array(),
             unaccounted: unaccounted.to_array(),
         }
+    }
+
+    /// Indirect irradiance per element, `(F·(B − E))_i` — light that has bounced at least
+    /// once — and its per-vertex reconstruction (for the final gather).
+    pub fn indirect_irradiance(&self) -> (Vec<Rgb>, Vec<Rgb>) {
+        let (_, emission) = element_materials(&self.scene, &self.mesh);
+        let b = self.solution.display_radiosity();
+        let reflected: Vec<Rgb> = b.iter().zip(&emission).map(|(b, e)| (*b - *e).max(Rgb::ZERO)).collect();
+        let mut h = vec![Rgb::ZERO; b.len()];
+        self.transport.gather(&reflected, &mut h);
+        let hv = reconstruct::vertex_radiosity(&self.scene, &self.mesh, &h);
+        (h, hv)
+    }
+
+    /// Renders one view by final gathering (direct light per pixel, indirect from the
+    /// solution); `indirect_vertex` comes from [`Solved::indirect_irradiance`]. Returns the
+    /// image and the rays cast.
+    pub fn render_gather(
+        &self,
+        camera: &Camera,
+        opts: &gather::Options,
+        tracer: &ElementTracer,
+        indirect_vertex: &[Rgb],
+        progress: &dyn Progress,
+    ) -> (Image, u64) {
+        let cam = PinholeCamera::new(camera, opts.width, opts.height);
+        gather::render(&self.scene, &self.mesh, &self.rays, tracer, indirect_vertex, &cam, opts, progress)
     }
 
     /// Renders one view with Gouraud (or flat) shading.

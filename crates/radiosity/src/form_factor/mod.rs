@@ -71,7 +71,7 @@ pub struct Options {
 
 impl Default for Options {
     fn default() -> Self {
-        Options { method: Method::PointSampled, seed: 0, visibility_samples: 2, max_receiver_samples: 3 }
+        Options { method: Method::PointSampled, seed: 0, visibility_samples: 1, max_receiver_samples: 3 }
     }
 }
 

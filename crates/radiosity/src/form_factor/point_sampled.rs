@@ -20,9 +20,14 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::kernel::point_to_polygon;
+use super::kernel::{point_to_point, point_to_polygon};
+
+/// Patches with at least this many elements get the far-field kernel with patch
+/// renormalisation.
+const BIG_PATCH: u32 = 8;
 use super::Options;
 use crate::accel::SceneRays;
+use crate::mesh::coverage::MAX_K;
 use crate::mesh::{Mesh, Receivers};
 use crate::sampling::{rng_for, stratified};
 use crate::scene::Scene;
@@ -120,6 +125,16 @@ pub(super) fn compute(
                 let mut far_sum = 0.0;
                 for &q in patch_list.iter() {
                     let pe = mesh.patches[q as usize];
+                    let poly_q = &scene.polygons[q as usize];
+                    // Large patches: far elements use the point-to-point kernel and are then
+                    // scaled so that, with the exact near ones, they add up to the exact
+                    // factor to the whole patch (contour integral) — cheap and still exact in
+                    // total, which keeps closed rooms closed.
+                    let big = pe.count >= BIG_PATCH;
+                    let exact_q = if big { point_to_polygon(c1, ei.normal, &poly_q.vertices, poly_q.normal) } else { 0.0 };
+                    let far_start = row.len();
+                    let mut approx_far_q = 0.0;
+                    let mut near_f1_q = 0.0;
                     for j in pe.first..pe.first + pe.count {
                         let ej = &mesh.elements[j as usize];
                         let (cj, nv) = ej.corners(&mesh.positions);
@@ -139,16 +154,28 @@ pub(super) fn compute(
                             opts.max_receiver_samples.max(1)
                         }
                         .min(opts.max_receiver_samples.max(1));
-                        let f1 = point_to_polygon(c1, ei.normal, cj, ej.normal);
+                        // A partly covered element may have a single open point at level k:
+                        // go finer rather than fall back to the representative point.
+                        let mut k = k;
+                        while k > 1 && k < MAX_K && receivers.points(i, k).len() <= 1 {
+                            k += 1;
+                        }
                         let recv_pts = receivers.points(i, k);
                         if k == 1 || recv_pts.len() <= 1 {
+                            let f1 = if big {
+                                point_to_point(c1, ei.normal, ej.centroid, ej.normal, ej.area)
+                            } else {
+                                point_to_polygon(c1, ei.normal, cj, ej.normal)
+                            };
                             if f1 > 0.0 {
-                                far_sum += f1;
+                                approx_far_q += f1;
                                 let v = visibility(c1, j, q, &mut rng, &mut nrays);
                                 row.push((j, f1 * v, true));
                             }
                             continue;
                         }
+                        let f1 = point_to_polygon(c1, ei.normal, cj, ej.normal);
+                        near_f1_q += f1;
                         let mut sum = 0.0;
                         let mut unocc = 0.0;
                         for &x in recv_pts.iter() {
@@ -164,6 +191,16 @@ pub(super) fn compute(
                         if sum > 0.0 {
                             row.push((j, sum / m, false));
                         }
+                    }
+                    if big && approx_far_q > 0.0 {
+                        let target = (exact_q - near_f1_q).max(0.0);
+                        let scale = target / approx_far_q;
+                        for e in row[far_start..].iter_mut().filter(|e| e.2) {
+                            e.1 *= scale;
+                        }
+                        far_sum += target;
+                    } else {
+                        far_sum += approx_far_q;
                     }
                 }
                 let mut alpha = if far_sum > 0.0 { (1.0 - near_excess / far_sum).clamp(0.5, 1.5) } else { 1.0 };
