@@ -219,8 +219,11 @@ mod tests {
                 let want = f(mesh.positions[v]);
                 // Boundary vertices are fitted exactly; interior ones average the touching
                 // elements, exact up to the slight non-uniformity of this trapezoid's grid.
+                let p = mesh.positions[v];
+                let boundary = p.x.abs() < 1e-9 || p.z.abs() < 1e-9 || (p.z - 559.2).abs() < 1e-9 || p.x > 549.0;
+                let tol = if boundary { 1e-9 } else { 1e-4 };
                 let got = vb[v].x;
-                assert!((got - want).abs() < 1e-5 * want, "vertex {v}: {got} vs {want}");
+                assert!((got - want).abs() < tol * want, "vertex {v} at {p}: {got} vs {want}");
             }
         }
     }
