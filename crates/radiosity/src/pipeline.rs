@@ -220,6 +220,7 @@ impl Solved {
             timings: self.timings.clone(),
             objects: self.objects(),
             images: Vec::new(),
+            views: Vec::new(),
             warnings: self.scene.warnings.iter().map(|w| w.to_string()).collect(),
         }
     }

@@ -56,6 +56,19 @@ pub struct EnergyReport {
     pub unaccounted: [f64; 3],
 }
 
+/// One rendered view.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ViewReport {
+    /// View name.
+    pub name: String,
+    /// Files written for it.
+    pub images: Vec<String>,
+    /// Seconds to render it (not counting the shared solve).
+    pub seconds: f64,
+    /// Rays cast for it.
+    pub rays: u64,
+}
+
 /// The whole report.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Report {
@@ -87,6 +100,8 @@ pub struct Report {
     pub objects: Vec<ObjectReport>,
     /// Images written.
     pub images: Vec<String>,
+    /// Views rendered from this one solve, with their own cost.
+    pub views: Vec<ViewReport>,
     /// Warnings.
     pub warnings: Vec<String>,
 }

@@ -81,6 +81,45 @@ impl Camera {
         Camera::from_json_str(&text, path)
     }
 
+    /// Reads a list of views: a JSON array of cameras (the form above, each optionally with
+    /// a `"name"`), or an object `{"views": [...]}`. Unnamed views are called `view<k>`.
+    pub fn load_views(path: &Path) -> Result<Vec<(String, Camera)>> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| Error::Input {
+            loc: Location { file: path.into(), line: Some(e.line()), column: Some(e.column()) },
+            msg: format!("invalid views JSON: {e}"),
+        })?;
+        let list = match &v {
+            serde_json::Value::Array(a) => a.clone(),
+            serde_json::Value::Object(o) => match o.get("views") {
+                Some(serde_json::Value::Array(a)) => a.clone(),
+                _ => return Err(Error::input(Location::file(path), "expected a JSON array of cameras or {\"views\": [...]}")),
+            },
+            _ => return Err(Error::input(Location::file(path), "expected a JSON array of cameras or {\"views\": [...]}")),
+        };
+        if list.is_empty() {
+            return Err(Error::input(Location::file(path), "the view list is empty"));
+        }
+        let mut out = Vec::with_capacity(list.len());
+        for (k, item) in list.iter().enumerate() {
+            let name = item.get("name").and_then(|n| n.as_str()).map(str::to_string).unwrap_or_else(|| format!("view{k}"));
+            if !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.') {
+                return Err(Error::input(Location::file(path), format!("view {k}: name '{name}' may use only letters, digits, '_', '-' and '.'")));
+            }
+            let j: CameraJson = serde_json::from_value(item.clone())
+                .map_err(|e| Error::input(Location::file(path), format!("view {k} ('{name}'): {e}")))?;
+            let cam = Camera {
+                position: DVec3::from_array(j.position),
+                look_at: DVec3::from_array(j.look_at),
+                up: DVec3::from_array(j.up),
+                vfov_deg: j.vfov_deg,
+            };
+            cam.validate().map_err(|m| Error::input(Location::file(path), format!("view {k} ('{name}'): {m}")))?;
+            out.push((name, cam));
+        }
+        Ok(out)
+    }
+
     /// A camera that frames a bounding box: looks at its centre from outside, along the
     /// direction that sees the largest face, with a 45° field of view.
     pub fn framing(lo: DVec3, hi: DVec3) -> Camera {
