@@ -146,10 +146,12 @@ pub fn inverse_bilinear(p: DVec3, c: &[DVec3; 4], normal: DVec3) -> (f64, f64) {
 }
 
 /// Renders the mesh with per-vertex radiosity `vertex_b` (Gouraud) or per-element
-/// radiosity `element_b` (flat).
+/// radiosity `element_b` (flat). Primary visibility comes from the rasteriser
+/// ([`super::raster`]); each sample's surface point is its camera ray's intersection with
+/// the visible element's plane.
 pub fn render(
     mesh: &Mesh,
-    tracer: &ElementTracer,
+    _tracer: &ElementTracer,
     element_b: &[Rgb],
     vertex_b: &[Rgb],
     cam: &PinholeCamera,
@@ -158,9 +160,10 @@ pub fn render(
 ) -> Image {
     let (w, h) = (opts.width, opts.height);
     let s = opts.spp_axis.max(1);
+    progress.begin("render", h as u64);
+    let ids = super::raster::rasterize(mesh, cam, w * s, h * s);
     let inv_spp = 1.0 / (s * s) as f64;
     let inv_pi = 1.0 / std::f64::consts::PI;
-    progress.begin("render", h as u64);
     let stopped = AtomicBool::new(false);
     let mut img = Image::new(w, h);
     img.pixels.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
@@ -172,20 +175,23 @@ pub fn render(
             let mut acc = Rgb::ZERO;
             for sj in 0..s {
                 for si in 0..s {
-                    let fx = x as f64 + (si as f64 + 0.5) / s as f64;
-                    let fy = y as f64 + (sj as f64 + 0.5) / s as f64;
-                    let dir = cam.direction(fx, fy);
-                    if let Some((e, p)) = tracer.trace(cam.eye, dir) {
-                        let el = &mesh.elements[e as usize];
-                        if el.normal.dot(dir) >= 0.0 {
-                            continue; // back side of a one-sided surface: black
-                        }
-                        let b = match opts.shading {
-                            Shading::Flat => element_b[e as usize],
-                            Shading::Gouraud => interpolate(mesh, e, p, vertex_b),
-                        };
-                        acc += b;
+                    let e = ids.ids[(y * s + sj) * ids.width + x * s + si];
+                    if e == u32::MAX {
+                        continue;
                     }
+                    let dir = cam.direction(x as f64 + (si as f64 + 0.5) / s as f64, y as f64 + (sj as f64 + 0.5) / s as f64);
+                    let el = &mesh.elements[e as usize];
+                    let den = el.normal.dot(dir);
+                    if den >= 0.0 {
+                        continue; // back side of a one-sided surface: black
+                    }
+                    acc += match opts.shading {
+                        Shading::Flat => element_b[e as usize],
+                        Shading::Gouraud => {
+                            let t = el.normal.dot(el.centroid - cam.eye) / den;
+                            interpolate(mesh, e, cam.eye + dir * t, vertex_b)
+                        }
+                    };
                 }
             }
             *px = acc * (inv_spp * inv_pi);
