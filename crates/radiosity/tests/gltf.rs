@@ -160,9 +160,10 @@ fn kajiya_cornell_box_from_shared() {
 #[test]
 fn node_hierarchy_transforms_apply_parent_after_child() {
     let (mut j, bin) = doc(&TRI, None);
+    let h = std::f64::consts::FRAC_1_SQRT_2;
     j["nodes"] = json!([
         {"name": "parent", "translation": [10, 0, 0], "children": [1]},
-        {"name": "child", "mesh": 0, "rotation": [0, 0, 0.70710678, 0.70710678], "scale": [2, 2, 2]}
+        {"name": "child", "mesh": 0, "rotation": [0, 0, h, h], "scale": [2, 2, 2]}
     ]);
     let d = load(&write_embedded("hier.gltf", j, &bin)).unwrap();
     assert_eq!(d.objects.len(), 1);

@@ -118,6 +118,8 @@ pub fn parse_gltf(
     let (json_bytes, blob, is_glb) = if bytes.starts_with(b"glTF") {
         let (j, b) = split_glb(bytes).map_err(|m| Error::input(Location::file(file), format!("invalid GLB file: {m}")))?;
         (j, b, true)
+    } else if file.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb")) {
+        return Err(Error::input(Location::file(file), "not a GLB file: it does not start with 'glTF'"));
     } else {
         (bytes, None, false)
     };
@@ -377,9 +379,8 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
         // Triangles of each mesh drawn, in the mesh's frame.
         let mut meshes: HashMap<usize, MeshTris> = HashMap::new();
         for inst in &instances {
-            if !meshes.contains_key(&inst.mesh) {
-                let t = self.mesh_triangles(inst.mesh)?;
-                meshes.insert(inst.mesh, t);
+            if let std::collections::hash_map::Entry::Vacant(slot) = meshes.entry(inst.mesh) {
+                slot.insert(self.mesh_triangles(inst.mesh)?);
             }
         }
 
