@@ -299,6 +299,46 @@ fn interleaved_stride_and_sparse_positions() {
     assert_eq!(v[2], DVec3::new(0., 3., 1.));
 }
 
+#[test]
+fn default_scene_choice_and_files_without_scenes() {
+    // "scene": 1 draws the second scene only.
+    let (mut j, bin) = doc(&TRI, None);
+    j["nodes"] = json!([{"mesh": 0, "name": "a"}, {"mesh": 0, "name": "b", "translation": [0, 0, 1]}]);
+    j["scenes"] = json!([{"nodes": [0]}, {"nodes": [1]}]);
+    j["scene"] = json!(1);
+    let d = load(&write_embedded("scene1.gltf", j.clone(), &bin)).unwrap();
+    assert_eq!(d.objects.iter().map(|o| o.name.as_str()).collect::<Vec<_>>(), ["b"]);
+    // No "scene": the first.
+    j.as_object_mut().unwrap().remove("scene");
+    let d = load(&write_embedded("scene0.gltf", j.clone(), &bin)).unwrap();
+    assert_eq!(d.objects[0].name, "a");
+    // No scenes at all: every root node.
+    j.as_object_mut().unwrap().remove("scenes");
+    j["nodes"][0]["children"] = json!([1]);
+    let d = load(&write_embedded("noscenes.gltf", j, &bin)).unwrap();
+    assert_eq!(d.objects.len(), 2);
+    assert!((d.polygons[1].vertices[0].z - 2.0).abs() < 1e-9, "child under its parent");
+}
+
+#[test]
+fn quantized_normalized_positions() {
+    // KHR_mesh_quantization: unsigned-short normalized VEC3 positions, 8-byte stride.
+    let q: [[u16; 3]; 3] = [[0, 0, 65535], [65535, 0, 65535], [0, 32768, 65535]];
+    let bin: Vec<u8> = q.iter().flat_map(|p| p.iter().flat_map(|c| c.to_le_bytes()).chain([0u8, 0])).collect();
+    let (mut j, _) = doc(&TRI, None);
+    j["accessors"][0]["componentType"] = json!(5123);
+    j["accessors"][0]["normalized"] = json!(true);
+    j["bufferViews"][0] = json!({"buffer": 0, "byteLength": 24, "byteStride": 8});
+    j["buffers"][0]["byteLength"] = json!(24);
+    j["extensionsUsed"] = json!(["KHR_mesh_quantization"]);
+    j["extensionsRequired"] = json!(["KHR_mesh_quantization"]);
+    let d = load(&write_embedded("quantized.gltf", j, &bin)).unwrap();
+    let v = &d.polygons[0].vertices;
+    assert_eq!(v[0], DVec3::new(0., 0., 1.));
+    assert_eq!(v[1], DVec3::new(1., 0., 1.));
+    assert!((v[2].y - 32768.0 / 65535.0).abs() < 1e-12);
+}
+
 // ---------------------------------------------------------------- materials
 
 #[test]
