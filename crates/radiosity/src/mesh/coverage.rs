@@ -86,7 +86,6 @@ impl Receivers {
                 let mut lv: [Vec<DVec3>; MAX_K] = Default::default();
                 let mut open3 = 0usize;
                 let mut n3 = 0usize;
-                let mut open_sum = DVec3::ZERO;
                 for k in 1..=MAX_K {
                     for p in grid(e, &mesh.positions, k) {
                         let open = !covered(p, e.normal, e.patch, scene, rays, diag);
@@ -94,7 +93,6 @@ impl Receivers {
                             n3 += 1;
                             if open {
                                 open3 += 1;
-                                open_sum += p;
                             }
                         }
                         if open {
@@ -106,32 +104,35 @@ impl Receivers {
                 // open fraction on a finer grid (reciprocity depends on it).
                 // Near such an edge the exchange with the touching surface is singular, so the
                 // finest receiver set becomes the open points of that grid too.
-                let frac = if open3 > 0 && open3 < n3 {
+                let open3_pts = lv[MAX_K - 1].clone();
+                let mut frac = open3 as f64 / n3 as f64;
+                if open3 > 0 && open3 < n3 {
                     let fine = grid(e, &mesh.positions, FINE_K);
                     let open: Vec<DVec3> =
                         fine.iter().copied().filter(|p| !covered(*p, e.normal, e.patch, scene, rays, diag)).collect();
-                    let f = open.len() as f64 / fine.len() as f64;
-                    lv[MAX_K - 1] = open;
-                    f
-                } else {
-                    open3 as f64 / n3 as f64
-                };
-                // k = 1: the centroid when open, else the open 3×3 point nearest the centre
-                // of the open part.
-                lv[0] = if frac == 1.0 {
+                    if !open.is_empty() {
+                        frac = open.len() as f64 / fine.len() as f64;
+                        lv[MAX_K - 1] = open;
+                    }
+                }
+                // k = 1: the centroid when the whole element is open, else the open point
+                // nearest the centre of the open part.
+                lv[0] = if open3 == n3 {
                     vec![e.centroid]
-                } else if open3 == 0 {
-                    Vec::new()
                 } else {
-                    let c = open_sum / open3 as f64;
-                    let best = lv[MAX_K - 1]
-                        .iter()
-                        .copied()
-                        .min_by(|a, b| (*a - c).length_squared().total_cmp(&(*b - c).length_squared()))
-                        .unwrap();
-                    vec![best]
+                    let pool = if open3_pts.is_empty() { &lv[MAX_K - 1] } else { &open3_pts };
+                    if pool.is_empty() {
+                        Vec::new()
+                    } else {
+                        let c = pool.iter().copied().sum::<DVec3>() / pool.len() as f64;
+                        let best = pool
+                            .iter()
+                            .copied()
+                            .min_by(|a, b| (*a - c).length_squared().total_cmp(&(*b - c).length_squared()));
+                        best.into_iter().collect()
+                    }
                 };
-                if lv[1].is_empty() && open3 > 0 {
+                if lv[1].is_empty() {
                     lv[1] = lv[MAX_K - 1].clone();
                 }
                 (lv, frac)
