@@ -163,7 +163,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     }
 
     let t = Instant::now();
-    let tracer = ElementTracer::new(&solved.mesh);
+    let two_sided: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
+    let tracer = ElementTracer::new(&solved.mesh, &two_sided);
     let indirect = if gather { Some(solved.indirect_irradiance().1) } else { None };
     let mut report = solved.report();
     report.timings.load = load_s;

@@ -127,13 +127,20 @@ impl Solved {
             .zip(means)
             .enumerate()
             .filter(|(k, _)| counts[*k] > 0)
-            .map(|(k, (o, (area, b)))| ObjectReport {
-                name: o.name.clone(),
-                area,
-                radiosity_rgb: b.to_array(),
-                radiance_rgb: (b / std::f64::consts::PI).to_array(),
-                elements: counts[k],
-                materials: mats[k].clone(),
+            .map(|(k, (o, (front, back)))| {
+                let pi = std::f64::consts::PI;
+                let has_back = back.area > 0.0;
+                let (area, b) = if front.area > 0.0 { (front.area, front.radiosity) } else { (back.area, back.radiosity) };
+                ObjectReport {
+                    name: o.name.clone(),
+                    area,
+                    radiosity_rgb: b.to_array(),
+                    radiance_rgb: (b / pi).to_array(),
+                    back_radiosity_rgb: (has_back && front.area > 0.0).then(|| back.radiosity.to_array()),
+                    back_radiance_rgb: (has_back && front.area > 0.0).then(|| (back.radiosity / pi).to_array()),
+                    elements: counts[k],
+                    materials: mats[k].clone(),
+                }
             })
             .collect()
     }

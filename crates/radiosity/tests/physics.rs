@@ -13,10 +13,14 @@ use radiosity::transport::SparseRows;
 use radiosity::{NoProgress, Rgb};
 
 fn factors(scene: &Scene, size: f64) -> (mesh::Mesh, SparseRows, Vec<f64>) {
+    factors_with(scene, size, &Options::default())
+}
+
+fn factors_with(scene: &Scene, size: f64, opts: &Options) -> (mesh::Mesh, SparseRows, Vec<f64>) {
     let mesh = mesh::mesh_uniform(scene, size);
     let rays = SceneRays::new(&scene.polygons);
     let rec = Receivers::compute(scene, &mesh, &rays);
-    let (f, _) = form_factor::compute(scene, &mesh, &rays, &rec, &Options::default(), &NoProgress).unwrap();
+    let (f, _) = form_factor::compute(scene, &mesh, &rays, &rec, opts, &NoProgress).unwrap();
     let open_area = rec.open_areas(&mesh);
     (mesh, f, open_area)
 }
@@ -102,10 +106,8 @@ fn unit_square_view_factors_within_one_percent() {
     assert!((f10 - 0.200043776).abs() < 0.01 * 0.200043776, "perpendicular: {f10}");
 }
 
-#[test]
-fn cornell_box_factors_are_reciprocal_and_rows_at_most_one() {
-    let scene = Scene::from_desc(builtin::cornell()).unwrap();
-    let (mesh, f, area) = factors(&scene, 80.0);
+/// (worst |A_i F_ij − A_j F_ji| / largest A_i F_ij, exchange-weighted mean relative error)
+fn reciprocity(mesh: &mesh::Mesh, f: &SparseRows, area: &[f64]) -> (f64, f64) {
     let mut worst: f64 = 0.0;
     let mut scale: f64 = 0.0;
     let (mut err_sum, mut sum) = (0.0, 0.0);
@@ -124,11 +126,25 @@ fn cornell_box_factors_are_reciprocal_and_rows_at_most_one() {
             sum += ai;
         }
     }
-    // Point sampling is reciprocal only up to its quadrature error, largest for elements
-    // that touch (block faces on the floor): bound the worst pair and the exchange-weighted
-    // mean at this coarse mesh (measured: 12 % of the largest exchange, 3.2 % mean).
-    assert!(worst <= 0.15 * scale, "reciprocity error {worst} of {scale}");
-    assert!(err_sum / sum <= 0.05, "mean reciprocity error {}", err_sum / sum);
+    (worst / scale, err_sum / sum)
+}
+
+#[test]
+fn cornell_box_factors_are_reciprocal_and_rows_at_most_one() {
+    let scene = Scene::from_desc(builtin::cornell()).unwrap();
+    // Point sampling is reciprocal only up to its quadrature and visibility-sampling error,
+    // largest for elements that touch (block faces on the floor). With 3×3 visibility rays
+    // per receiver point (measured: worst pair 6.4 % of the largest exchange, mean 2.8 %):
+    let opts = Options { visibility_samples: 3, ..Default::default() };
+    let (mesh, f, area) = factors_with(&scene, 80.0, &opts);
+    let (worst, mean) = reciprocity(&mesh, &f, &area);
+    assert!(worst <= 0.10, "worst reciprocity error {worst}");
+    assert!(mean <= 0.04, "mean reciprocity error {mean}");
+    // At the default single ray per point, pairs are noisier but the mean stays small
+    // (measured 3.8 %).
+    let (mesh, f, area) = factors(&scene, 80.0);
+    let (_, mean) = reciprocity(&mesh, &f, &area);
+    assert!(mean <= 0.05, "mean reciprocity error {mean}");
     // The open front lets light escape: the floor's rows must sum to clearly less than 1.
     let floor_rows: Vec<f64> = (0..mesh.patches[0].count as usize).map(|i| f.row_sum(i)).collect();
     let mean = floor_rows.iter().sum::<f64>() / floor_rows.len() as f64;

@@ -8,7 +8,8 @@
 //! set of receiver points (`k × k` midpoints of a regular grid in its parameter domain,
 //! k = 1, 2, 3) and a point is *covered* when every one of [`PROBES`] probe rays leaving it
 //! (cosine-distributed about the normal) hits the back side of a surface first, i.e. the
-//! point lies inside a closed solid. Form factors are gathered at open points only, so the
+//! point lies inside a closed solid (for two-sided surfaces, "back" is the side opposite
+//! the input winding's front). Form factors are gathered at open points only, so the
 //! element's value is the radiosity of its open part; per-object averages weight each
 //! element by its open fraction (covered area counts as zero, as in the path-traced
 //! references), and the power formulation uses open areas.
@@ -106,7 +107,12 @@ impl Receivers {
                 // finest receiver set becomes the open points of that grid too.
                 let open3_pts = lv[MAX_K - 1].clone();
                 let mut frac = open3 as f64 / n3 as f64;
-                if open3 > 0 && open3 < n3 {
+                // A contact edge can cross a corner without touching the 3×3 points: probe
+                // the corners too (pulled 2 % towards the centroid).
+                let (corners, nc) = e.corners(&mesh.positions);
+                let corner_covered = open3 == n3
+                    && corners[..nc].iter().any(|c| covered(*c + (e.centroid - *c) * 0.02, e.normal, e.patch, scene, rays, diag));
+                if open3 > 0 && (open3 < n3 || corner_covered) {
                     let fine = grid(e, &mesh.positions, FINE_K);
                     let open: Vec<DVec3> =
                         fine.iter().copied().filter(|p| !covered(*p, e.normal, e.patch, scene, rays, diag)).collect();
@@ -140,7 +146,7 @@ impl Receivers {
             .collect();
         let (points, open_fraction): (Vec<_>, Vec<f64>) = res.into_iter().unzip();
         let mixed = open_fraction.iter().filter(|f| **f > 0.0 && **f < 1.0).count() as u64;
-        let rays = PROBES as u64 * ((1 + 4 + 9) * mesh.len() as u64 + (FINE_K * FINE_K) as u64 * mixed);
+        let rays = PROBES as u64 * ((1 + 4 + 9 + 4) * mesh.len() as u64 + (FINE_K * FINE_K) as u64 * mixed);
         Receivers { points, open_fraction, rays }
     }
 }
@@ -164,8 +170,11 @@ fn covered(p: DVec3, n: DVec3, patch: u32, scene: &Scene, rays: &SceneRays, diag
         let (u1, u2) = halton2(s, (0.5 / PROBES as f64, 0.25));
         let d = cosine_hemisphere(u1, u2);
         let dir = t * d.x + b * d.y + n * d.z;
-        match rays.closest(origin, dir.as_vec3(), f32::INFINITY, Some(patch)) {
-            Some((_, q)) if scene.polygons[q as usize].normal.dot(dir) > 0.0 => {}
+        // A hit "from behind" is the back of a one-sided surface, or the generated back
+        // copy of a two-sided one (behind its input winding's front): inside a two-sided box
+        // counts as inside, as for a one-sided one.
+        match rays.closest_facing(origin, dir.as_vec3(), f32::INFINITY, Some(patch)) {
+            Some((_, q)) if scene.polygons[q as usize].back_side || scene.polygons[q as usize].normal.dot(dir) > 0.0 => {}
             _ => return false,
         }
     }

@@ -184,17 +184,36 @@ fn quantize_normal(n: DVec3) -> [i32; 3] {
     [(n.x * s).round() as i32, (n.y * s).round() as i32, (n.z * s).round() as i32]
 }
 
-/// Area-weighted mean radiosity per object and the object's area. `open_fraction` is the
-/// uncovered share of each element: covered area counts as zero radiosity (the convention
-/// of the path-traced references), but still counts in the object's area.
-pub fn object_means(scene: &Scene, mesh: &Mesh, element_b: &[Rgb], open_fraction: &[f64]) -> Vec<(f64, Rgb)> {
-    let mut acc = vec![(0.0, Rgb::ZERO); scene.objects.len()];
+/// Area and area-weighted mean radiosity of one side of an object.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SideMean {
+    /// Area (covered parts included).
+    pub area: f64,
+    /// Mean radiosity (covered parts count as zero).
+    pub radiosity: Rgb,
+}
+
+/// Per object: its front side (the input winding) and, for two-sided objects, its back
+/// side. `open_fraction` is the uncovered share of each element: covered area counts as
+/// zero radiosity (the convention of the path-traced references) but still counts in the
+/// area.
+pub fn object_means(scene: &Scene, mesh: &Mesh, element_b: &[Rgb], open_fraction: &[f64]) -> Vec<(SideMean, SideMean)> {
+    let mut acc = vec![(SideMean::default(), SideMean::default()); scene.objects.len()];
     for (ei, e) in mesh.elements.iter().enumerate() {
-        let o = scene.polygons[e.patch as usize].object as usize;
-        acc[o].0 += e.area;
-        acc[o].1 += element_b[ei] * (e.area * open_fraction[ei]);
+        let poly = &scene.polygons[e.patch as usize];
+        let o = &mut acc[poly.object as usize];
+        let side = if poly.back_side { &mut o.1 } else { &mut o.0 };
+        side.area += e.area;
+        side.radiosity += element_b[ei] * (e.area * open_fraction[ei]);
     }
-    acc.into_iter().map(|(a, s)| (a, if a > 0.0 { s / a } else { Rgb::ZERO })).collect()
+    for (f, b) in acc.iter_mut() {
+        for s in [f, b] {
+            if s.area > 0.0 {
+                s.radiosity /= s.area;
+            }
+        }
+    }
+    acc
 }
 
 #[cfg(test)]

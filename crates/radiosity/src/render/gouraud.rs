@@ -40,20 +40,33 @@ pub struct Options {
 pub struct ElementTracer {
     bvh: Bvh,
     owner: Vec<u32>,
+    /// Per element: (normal, one side of a two-sided pair).
+    facing: Vec<(glam::Vec3, bool)>,
 }
 
 impl ElementTracer {
-    /// Builds the BVH over the mesh's element triangles.
-    pub fn new(mesh: &Mesh) -> Self {
+    /// Builds the BVH over the mesh's element triangles. `two_sided_patch[p]` marks patches
+    /// that are one side of a two-sided pair (see [`crate::scene::Polygon::two_sided`]).
+    pub fn new(mesh: &Mesh, two_sided_patch: &[bool]) -> Self {
         let (tris, owner) = mesh.triangles();
-        ElementTracer { bvh: Bvh::build(&tris), owner }
+        let facing = mesh
+            .elements
+            .iter()
+            .map(|e| (e.normal.as_vec3(), two_sided_patch.get(e.patch as usize).copied().unwrap_or(false)))
+            .collect();
+        ElementTracer { bvh: Bvh::build(&tris), owner, facing }
     }
 
-    /// The element hit first by the ray and the hit point, if any.
+    /// The element hit first by the ray and the hit point, if any. The back face of one side
+    /// of a two-sided pair is skipped (its twin, at the same place, faces the ray).
     #[inline]
     pub fn trace(&self, origin: DVec3, dir: DVec3) -> Option<(u32, DVec3)> {
-        let ray = Ray::new(origin.as_vec3(), dir.as_vec3(), 0.0, f32::INFINITY);
-        let h = self.bvh.intersect(&ray)?;
+        let d = dir.as_vec3();
+        let ray = Ray::new(origin.as_vec3(), d, 0.0, f32::INFINITY);
+        let h = self.bvh.intersect_filtered(&ray, |prim| {
+            let (n, two) = self.facing[self.owner[prim as usize] as usize];
+            two && n.dot(d) > 0.0
+        })?;
         let p = origin + dir * h.t as f64;
         Some((self.owner[h.prim as usize], p))
     }
@@ -151,7 +164,7 @@ pub fn inverse_bilinear(p: DVec3, c: &[DVec3; 4], normal: DVec3) -> (f64, f64) {
 /// the visible element's plane.
 pub fn render(
     mesh: &Mesh,
-    _tracer: &ElementTracer,
+    tracer: &ElementTracer,
     element_b: &[Rgb],
     vertex_b: &[Rgb],
     cam: &PinholeCamera,
@@ -161,7 +174,7 @@ pub fn render(
     let (w, h) = (opts.width, opts.height);
     let s = opts.spp_axis.max(1);
     progress.begin("render", h as u64);
-    let ids = super::raster::rasterize(mesh, cam, w * s, h * s);
+    let ids = super::raster::rasterize(mesh, cam, w * s, h * s, &|e| tracer.facing[e as usize].1);
     let inv_spp = 1.0 / (s * s) as f64;
     let inv_pi = 1.0 / std::f64::consts::PI;
     let stopped = AtomicBool::new(false);

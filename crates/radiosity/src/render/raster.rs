@@ -34,7 +34,16 @@ struct ScreenTri {
 
 /// Rasterises the mesh seen by `cam` into a `width × height` sample grid (the camera must be
 /// prepared for the same size). Sample (x, y) has its centre at (x + 0.5, y + 0.5).
-pub fn rasterize(mesh: &Mesh, cam: &PinholeCamera, width: usize, height: usize) -> IdBuffer {
+/// Elements for which `two_sided(e)` is true are culled when seen from behind (their
+/// coincident twin shows instead); back faces of one-sided elements are kept (they occlude
+/// and render black).
+pub fn rasterize(
+    mesh: &Mesh,
+    cam: &PinholeCamera,
+    width: usize,
+    height: usize,
+    two_sided: &(dyn Fn(u32) -> bool + Sync),
+) -> IdBuffer {
     let (right, up, fwd) = cam.frame();
     let (sx_scale, sy_scale) = cam.screen_scale();
     let (wf, hf) = (width as f64, height as f64);
@@ -55,6 +64,10 @@ pub fn rasterize(mesh: &Mesh, cam: &PinholeCamera, width: usize, height: usize) 
         .par_iter()
         .zip(owner.par_iter())
         .flat_map_iter(|(t, &e)| {
+            let el = &mesh.elements[e as usize];
+            if two_sided(e) && el.normal.dot(el.centroid - cam.eye) > 0.0 {
+                return Vec::new();
+            }
             let cs: Vec<DVec3> = t
                 .iter()
                 .map(|v| {
