@@ -20,6 +20,9 @@ pub struct SolveFlags {
     /// Target element size in scene units [default: scene diagonal / 32].
     #[arg(long, value_name = "S")]
     pub mesh_size: Option<f64>,
+    /// Refuse meshes with more elements than this.
+    #[arg(long, value_name = "N", default_value_t = radiosity::pipeline::DEFAULT_MAX_ELEMENTS)]
+    pub max_elements: u64,
     /// Form-factor method.
     #[arg(long = "form-factors", value_name = "METHOD", default_value = "point-sampled")]
     pub form_factors: String,
@@ -86,6 +89,7 @@ impl SolveFlags {
             },
             solver,
             solve: radiosity::solve::Options { tolerance: self.tolerance, max_iterations: self.max_iterations, time_budget },
+            max_elements: self.max_elements,
         })
     }
 

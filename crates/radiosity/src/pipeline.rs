@@ -28,6 +28,8 @@ pub struct Settings {
     pub solver: Solver,
     /// Stopping rules.
     pub solve: solve::Options,
+    /// Refuse meshes with more elements than this (form factors cost grows as n²).
+    pub max_elements: u64,
 }
 
 impl Default for Settings {
@@ -37,9 +39,13 @@ impl Default for Settings {
             form_factors: form_factor::Options::default(),
             solver: Solver::Jacobi,
             solve: solve::Options::default(),
+            max_elements: DEFAULT_MAX_ELEMENTS,
         }
     }
 }
+
+/// Default cap on the element count.
+pub const DEFAULT_MAX_ELEMENTS: u64 = 200_000;
 
 /// A solved scene.
 pub struct Solved {
@@ -79,6 +85,15 @@ pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -
     let mut timings = Timings::default();
     let t = Instant::now();
     let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
+    let count = mesh::count_uniform(&scene, size);
+    if count > settings.max_elements {
+        // Elements scale as 1/size²: the size that would meet the cap.
+        let needed = size * (count as f64 / settings.max_elements as f64).sqrt();
+        return Err(crate::Error::Invalid(format!(
+            "mesh size {size:.4} would create {count} elements (limit {}); use --mesh-size {needed:.4} or larger, or raise --max-elements",
+            settings.max_elements
+        )));
+    }
     let mesh = mesh::mesh_uniform(&scene, size);
     timings.mesh = t.elapsed().as_secs_f64();
 

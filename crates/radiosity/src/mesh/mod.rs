@@ -15,7 +15,7 @@ mod uniform;
 use glam::DVec3;
 
 pub use coverage::Receivers;
-pub use uniform::mesh_uniform;
+pub use uniform::{count_uniform, mesh_uniform};
 
 use crate::scene::Scene;
 

@@ -140,6 +140,70 @@ pub fn direct_irradiance<'s>(
     (h, nrays)
 }
 
+/// Emitters above which [`direct_irradiance_sampled`] replaces the per-emitter loop.
+pub const LOOP_EMITTERS: usize = 4;
+
+/// Direct irradiance at `x` from many emitters: the exact unoccluded factor to every
+/// emitter is computed, then the shadow rays (one per point of `samples`) pick emitters in
+/// proportion to their unoccluded contribution (the first coordinate, stratified, selects
+/// the emitter through the cumulative weights and is re-used inside it), so the estimate
+/// is unbiased and rays go where the light comes from. `buf` is scratch space.
+#[allow(clippy::too_many_arguments)]
+pub fn direct_irradiance_sampled(
+    scene: &Scene,
+    rays: &SceneRays,
+    emitters: &[Emitter],
+    x: DVec3,
+    n: DVec3,
+    own: u32,
+    samples: &[(f64, f64)],
+    buf: &mut Vec<(f64, f64)>,
+) -> (Rgb, u64) {
+    buf.clear();
+    let mut total = 0.0;
+    for em in emitters {
+        let f = if em.polygon == own {
+            0.0
+        } else {
+            let q = &scene.polygons[em.polygon as usize];
+            point_to_polygon(x, n, &q.vertices, q.normal)
+        };
+        let w = f * crate::luminance(em.exitance).max(1e-300);
+        total += w;
+        buf.push((f, total));
+    }
+    if total <= 0.0 || samples.is_empty() {
+        return (Rgb::ZERO, 0);
+    }
+    let mut h = Rgb::ZERO;
+    let mut nrays = 0;
+    for &(a, b) in samples {
+        let t = a * total;
+        let k = buf.partition_point(|e| e.1 <= t).min(buf.len() - 1);
+        let (f, hi) = buf[k];
+        let lo = if k == 0 { 0.0 } else { buf[k - 1].1 };
+        let w = hi - lo;
+        if w <= 0.0 {
+            continue;
+        }
+        let em = &emitters[k];
+        let q = &scene.polygons[em.polygon as usize];
+        let a2 = ((t - lo) / w).clamp(0.0, 1.0 - 1e-12);
+        let y = sample_polygon(&q.vertices, &em.cdf, a2, b);
+        // Points of the emitter behind x's horizon are outside the clipped factor f: count
+        // them as visible rather than bias the choice of emitter.
+        let visible = n.dot(y - x) <= 0.0 || {
+            nrays += 1;
+            rays.visible(x, own, y, em.polygon)
+        };
+        if visible {
+            // f·E / p with p = w / total.
+            h += em.exitance * (f * total / w);
+        }
+    }
+    (h / samples.len() as f64, nrays)
+}
+
 /// Stratified points for one pixel: `count` jittered cells of a `side × side` grid over
 /// [0,1)², shuffled so that consecutive chunks (one per pixel position) each spread over
 /// the whole domain while the pixel as a whole stays stratified.
@@ -185,7 +249,11 @@ pub fn render(
             let mut nrays = 0u64;
             let mut sub = Vec::new();
             let m2 = opts.shadow_axis.max(1) * opts.shadow_axis.max(1);
-            let mut patterns: Vec<Vec<(f64, f64)>> = vec![Vec::new(); ems.len()];
+            // One pattern per emitter when they are looped over; one shared pattern when
+            // emitters are sampled.
+            let npat = if ems.len() <= LOOP_EMITTERS { ems.len() } else { 1 };
+            let mut patterns: Vec<Vec<(f64, f64)>> = vec![Vec::new(); npat];
+            let mut scratch = Vec::new();
             for (x, px) in row.iter_mut().enumerate() {
                 let mut rng = rng_for(opts.seed, (y * w + x) as u64);
                 stratified(s, &mut rng, &mut sub);
@@ -205,9 +273,14 @@ pub fn render(
                     let mat = &scene.materials[poly.material as usize];
                     let mut l = mat.emission;
                     if mat.reflectance.max_element() > 0.0 {
-                        let (hd, r) = direct_irradiance(scene, rays, &ems, p, el.normal, el.patch, |em| {
-                            &patterns[em][k * m2..(k + 1) * m2]
-                        });
+                        let (hd, r) = if ems.len() <= LOOP_EMITTERS {
+                            direct_irradiance(scene, rays, &ems, p, el.normal, el.patch, |em| {
+                                &patterns[em][k * m2..(k + 1) * m2]
+                            })
+                        } else {
+                            let pat = &patterns[0][k * m2..(k + 1) * m2];
+                            direct_irradiance_sampled(scene, rays, &ems, p, el.normal, el.patch, pat, &mut scratch)
+                        };
                         nrays += r;
                         let hi = interpolate(mesh, e, p, indirect_vertex);
                         l += mat.reflectance * (hd + hi) * inv_pi;
