@@ -87,10 +87,19 @@ pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -
     let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
     let count = mesh::count_uniform(&scene, size);
     if count > settings.max_elements {
-        // Elements scale as 1/size²: the size that would meet the cap.
-        let needed = size * (count as f64 / settings.max_elements as f64).sqrt();
+        // The smallest size that meets the cap, by bisection on the count.
+        let (mut lo, mut hi) = (size, scene.diagonal().max(size));
+        for _ in 0..60 {
+            let mid = (lo * hi).sqrt();
+            if mesh::count_uniform(&scene, mid) > settings.max_elements {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let many = if count == u64::MAX { "more than 10^19".to_string() } else { count.to_string() };
         return Err(crate::Error::Invalid(format!(
-            "mesh size {size:.4} would create {count} elements (limit {}); use --mesh-size {needed:.4} or larger, or raise --max-elements",
+            "mesh size {size:.4e} would create {many} elements (limit {}); use --mesh-size {hi:.4e} or larger, or raise --max-elements",
             settings.max_elements
         )));
     }
