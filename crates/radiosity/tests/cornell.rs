@@ -47,3 +47,34 @@ fn cornell_box_per_object_radiance_matches_path_tracer() {
     eprintln!("worst per-object error {:.3} % ({})", worst.0 * 100.0, worst.1);
     assert!(worst.0 <= 0.01, "worst per-object error {:.3} % ({})", worst.0 * 100.0, worst.1);
 }
+
+/// The whole image against the path-traced reference (read from ../shared by path; skipped
+/// without it): light-masked relative RMSE at 256², default settings, final gather.
+#[test]
+fn cornell_box_image_matches_path_tracer() {
+    let Some(ref_path) = common::shared("reference/cornell-box/mitsuba_256x256_16384spp.exr") else { return };
+    let reference = radiosity::output::exr::read(&ref_path).unwrap();
+    let scene = Scene::from_desc(builtin::cornell()).unwrap();
+    let camera = scene.camera.unwrap();
+    let solved = solve_scene(scene, &Settings::default(), &NoProgress).unwrap();
+    let two_sided: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
+    let tracer = radiosity::render::gouraud::ElementTracer::new(&solved.mesh, &two_sided);
+    let (_, hv) = solved.indirect_irradiance();
+    let opts = radiosity::render::gather::Options { width: 256, height: 256, spp_axis: 4, shadow_axis: 2, seed: 0 };
+    let (img, _) = solved.render_gather(&camera, &opts, &tracer, &hv, &NoProgress);
+    let e = radiosity::output::metrics::relative_rmse_light_masked(&img, &reference).unwrap();
+    eprintln!("light-masked relative RMSE {:.3} %", e * 100.0);
+    // Measured 2.0 % (the reference's own noise is 0.85 %); issue 2 asks for ≤ 10 %.
+    assert!(e <= 0.03, "light-masked relative RMSE {:.3} %", e * 100.0);
+    // Gouraud, the preview, is coarser but must stay well within the issue-2 bound.
+    let opts = radiosity::render::gouraud::Options {
+        width: 256,
+        height: 256,
+        spp_axis: 4,
+        shading: radiosity::render::gouraud::Shading::Gouraud,
+    };
+    let img = solved.render(&camera, &opts, &tracer, &NoProgress);
+    let e = radiosity::output::metrics::relative_rmse_light_masked(&img, &reference).unwrap();
+    eprintln!("gouraud: light-masked relative RMSE {:.3} %", e * 100.0);
+    assert!(e <= 0.06, "gouraud light-masked relative RMSE {:.3} %", e * 100.0);
+}
