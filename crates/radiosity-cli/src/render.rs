@@ -54,7 +54,7 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 512)]
     pub height: usize,
     /// Samples per pixel along each axis (box filter).
-    #[arg(long, value_name = "N", default_value_t = 4)]
+    #[arg(long, value_name = "N", default_value_t = 6)]
     pub spp: usize,
     /// Image reconstruction: gather (direct light per pixel, indirect from the solution;
     /// matches a path tracer), gouraud (radiosity interpolated from vertices; instant

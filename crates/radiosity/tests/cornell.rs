@@ -60,11 +60,12 @@ fn cornell_box_image_matches_path_tracer() {
     let two_sided: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
     let tracer = radiosity::render::gouraud::ElementTracer::new(&solved.mesh, &two_sided);
     let (_, hv) = solved.indirect_irradiance();
-    let opts = radiosity::render::gather::Options { width: 256, height: 256, spp_axis: 4, shadow_axis: 2, seed: 0 };
+    let opts = radiosity::render::gather::Options { width: 256, height: 256, spp_axis: 6, shadow_axis: 2, seed: 0 };
     let (img, _) = solved.render_gather(&camera, &opts, &tracer, &hv, &NoProgress);
     let e = radiosity::output::metrics::relative_rmse_light_masked(&img, &reference).unwrap();
     eprintln!("light-masked relative RMSE {:.3} %", e * 100.0);
-    // Measured 2.0 % (the reference's own noise is 0.85 %); issue 2 asks for ≤ 10 %.
+    // Measured 1.74 % (the reference's own noise is 0.85 %); issue 2 asks for ≤ 10 %,
+    // issue 5 for ≤ 2 %.
     assert!(e <= 0.03, "light-masked relative RMSE {:.3} %", e * 100.0);
     // Gouraud, the preview, is coarser but must stay well within the issue-2 bound.
     let opts = radiosity::render::gouraud::Options {
