@@ -53,9 +53,10 @@ pub struct RenderArgs {
     /// Image height in pixels.
     #[arg(long, default_value_t = 512)]
     pub height: usize,
-    /// Samples per pixel along each axis (box filter).
-    #[arg(long, value_name = "N", default_value_t = 6)]
-    pub spp: usize,
+    /// Samples per pixel along each axis (box filter) [default: 6 for gather, 3 for
+    /// gouraud and flat].
+    #[arg(long, value_name = "N")]
+    pub spp: Option<usize>,
     /// Image reconstruction: gather (direct light per pixel, indirect from the solution;
     /// matches a path tracer), gouraud (radiosity interpolated from vertices; instant
     /// preview) or flat (one value per element).
@@ -87,7 +88,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
         bail!("--width and --height must be between 1 and 16384");
     }
-    if a.spp == 0 || a.spp > 64 {
+    let spp = a.spp.unwrap_or(if a.mode == "gather" { 6 } else { 3 });
+    if spp == 0 || spp > 64 {
         bail!("--spp must be between 1 and 64");
     }
     let shading = match a.mode.as_str() {
@@ -177,16 +179,16 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                 let gopts = gather::Options {
                     width: a.width,
                     height: a.height,
-                    spp_axis: a.spp,
+                    spp_axis: spp,
                     shadow_axis: a.shadow_rays,
                     seed: a.solve.seed,
                 };
                 solved.render_gather(cam, &gopts, &tracer, hv, &NeverStop(&quiet))
             }
             None => {
-                let opts = gouraud::Options { width: a.width, height: a.height, spp_axis: a.spp, shading };
+                let opts = gouraud::Options { width: a.width, height: a.height, spp_axis: spp, shading };
                 let img = solved.render(cam, &opts, &tracer, &NeverStop(&quiet));
-                let rays = (a.width * a.height * a.spp * a.spp) as u64;
+                let rays = (a.width * a.height * spp * spp) as u64;
                 (img, rays)
             }
         };

@@ -96,6 +96,21 @@ pub fn interpolate(mesh: &Mesh, e: u32, p: DVec3, vertex_b: &[Rgb]) -> Rgb {
     }
 }
 
+/// Value at element parameters (u, v): bilinear on quads, barycentric (weights of v1, v2)
+/// on triangles.
+#[inline]
+pub fn interpolate_uv(mesh: &Mesh, e: u32, u: f64, v: f64, vertex_b: &[Rgb]) -> Rgb {
+    let el = &mesh.elements[e as usize];
+    let vb = |k: usize| vertex_b[el.vertices[k] as usize];
+    let (u, v) = (u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+    if el.vertices[3] == crate::mesh::NO_VERTEX {
+        let w0 = (1.0 - u - v).max(0.0);
+        vb(0) * w0 + vb(1) * u + vb(2) * v
+    } else {
+        vb(0) * ((1.0 - u) * (1.0 - v)) + vb(1) * (u * (1.0 - v)) + vb(2) * (u * v) + vb(3) * ((1.0 - u) * v)
+    }
+}
+
 /// Barycentric weights of p in triangle (a, b, c), clamped to the triangle.
 pub fn barycentric(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (f64, f64, f64) {
     let (v0, v1, v2) = (b - a, c - a, p - a);
@@ -175,6 +190,8 @@ pub fn render(
     let s = opts.spp_axis.max(1);
     progress.begin("render", h as u64);
     let ids = super::raster::rasterize(mesh, cam, w * s, h * s, &|e| tracer.facing[e as usize].1);
+    // Planar elements face the eye entirely or not at all.
+    let front: Vec<bool> = mesh.elements.iter().map(|e| e.normal.dot(e.centroid - cam.eye) < 0.0).collect();
     let inv_spp = 1.0 / (s * s) as f64;
     let inv_pi = 1.0 / std::f64::consts::PI;
     let stopped = AtomicBool::new(false);
@@ -188,21 +205,16 @@ pub fn render(
             let mut acc = Rgb::ZERO;
             for sj in 0..s {
                 for si in 0..s {
-                    let e = ids.ids[(y * s + sj) * ids.width + x * s + si];
-                    if e == u32::MAX {
-                        continue;
-                    }
-                    let dir = cam.direction(x as f64 + (si as f64 + 0.5) / s as f64, y as f64 + (sj as f64 + 0.5) / s as f64);
-                    let el = &mesh.elements[e as usize];
-                    let den = el.normal.dot(dir);
-                    if den >= 0.0 {
-                        continue; // back side of a one-sided surface: black
+                    let k = (y * s + sj) * ids.width + x * s + si;
+                    let e = ids.ids[k];
+                    if e == u32::MAX || !front[e as usize] {
+                        continue; // background, or the back of a one-sided surface: black
                     }
                     acc += match opts.shading {
                         Shading::Flat => element_b[e as usize],
                         Shading::Gouraud => {
-                            let t = el.normal.dot(el.centroid - cam.eye) / den;
-                            interpolate(mesh, e, cam.eye + dir * t, vertex_b)
+                            let [u, v] = ids.uv[k];
+                            interpolate_uv(mesh, e, u as f64, v as f64, vertex_b)
                         }
                     };
                 }

@@ -1,12 +1,14 @@
-//! Primary visibility by rasterisation: a supersampled z-buffer of element ids.
+//! Primary visibility by rasterisation: a supersampled z-buffer of element ids and element
+//! parameters.
 //!
-//! Every element triangle is clipped to the near plane, projected, and scan-converted with
-//! edge functions over the samples whose centres it covers; depth is compared as 1/z, which
-//! is affine in screen space for planar triangles. The result is, per sample, the visible
-//! element; the shading stage recovers the exact surface point by intersecting the
-//! sample's camera ray with that element's plane, so the image is identical in geometry to
-//! ray casting, at a fraction of the cost (the classic radiosity display pipeline,
-//! Cohen & Greenberg 1985, without the hardware).
+//! Every element is drawn as triangles (quads along the v0–v2 diagonal), clipped to the
+//! near plane, projected, and scan-converted with edge functions over the samples whose
+//! centres it covers; depth is compared as 1/z, which is affine in screen space for planar
+//! triangles. Each sample keeps the visible element and its parameters there, interpolated
+//! perspective-correctly: (u, v) of the bilinear map for quads (exact on parallelograms,
+//! continuous across the diagonal otherwise) and the barycentric weights of v1, v2 for
+//! triangles — so Gouraud shading needs no ray and no inverse map (the classic radiosity
+//! display pipeline, Cohen & Greenberg 1985, without the hardware).
 
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -14,7 +16,8 @@ use rayon::prelude::*;
 use super::PinholeCamera;
 use crate::mesh::Mesh;
 
-/// Visible element per sample (`u32::MAX` = background), row-major, `width × height`.
+/// Visible element per sample (`u32::MAX` = background) and its parameters, row-major,
+/// `width × height`.
 pub struct IdBuffer {
     /// Samples across.
     pub width: usize,
@@ -22,18 +25,22 @@ pub struct IdBuffer {
     pub height: usize,
     /// Element ids.
     pub ids: Vec<u32>,
+    /// Element parameters (u, v) at each sample.
+    pub uv: Vec<[f32; 2]>,
 }
 
 struct ScreenTri {
     p: [DVec2; 3],
     inv_z: [f64; 3],
+    /// Element parameters at the vertices, divided by z (for perspective-correct use).
+    uv_z: [DVec2; 3],
     element: u32,
     ymin: usize,
     ymax: usize,
 }
 
 /// Rasterises the mesh seen by `cam` into a `width × height` sample grid (the camera must be
-/// prepared for the same size). Sample (x, y) has its centre at (x + 0.5, y + 0.5).
+/// prepared for the same aspect). Sample (x, y) has its centre at (x + 0.5, y + 0.5).
 /// Elements for which `two_sided(e)` is true are culled when seen from behind (their
 /// coincident twin shows instead); back faces of one-sided elements are kept (they occlude
 /// and render black).
@@ -53,55 +60,71 @@ pub fn rasterize(
         extent = extent.max((*p - cam.eye).length());
     }
     let z_near = (extent * 1e-6).max(f64::MIN_POSITIVE);
-    let (tris, owner) = mesh.triangles();
-    let project = |c: DVec3| -> (DVec2, f64) {
-        let z = c.z;
-        let x = (c.x / z * sx_scale + 1.0) * 0.5 * wf;
-        let y = (1.0 - c.y / z * sy_scale) * 0.5 * hf;
-        (DVec2::new(x, y), 1.0 / z)
-    };
-    let screen: Vec<ScreenTri> = tris
+    let screen: Vec<ScreenTri> = mesh
+        .elements
         .par_iter()
-        .zip(owner.par_iter())
-        .flat_map_iter(|(t, &e)| {
-            let el = &mesh.elements[e as usize];
-            if two_sided(e) && el.normal.dot(el.centroid - cam.eye) > 0.0 {
-                return Vec::new();
-            }
-            let cs: Vec<DVec3> = t
-                .iter()
-                .map(|v| {
-                    let d = v.as_dvec3() - cam.eye;
-                    DVec3::new(d.dot(right), d.dot(up), d.dot(fwd))
-                })
-                .collect();
-            // Clip against z >= z_near (Sutherland–Hodgman); at most 4 vertices remain.
-            let mut poly: Vec<DVec3> = Vec::with_capacity(4);
-            for k in 0..3 {
-                let (a, b) = (cs[k], cs[(k + 1) % 3]);
-                let (ina, inb) = (a.z >= z_near, b.z >= z_near);
-                if ina {
-                    poly.push(a);
-                }
-                if ina != inb {
-                    let t = (z_near - a.z) / (b.z - a.z);
-                    poly.push(a + (b - a) * t);
-                }
-            }
+        .enumerate()
+        .flat_map_iter(|(e, el)| {
             let mut out = Vec::new();
-            if poly.len() >= 3 {
-                let pr: Vec<(DVec2, f64)> = poly.iter().map(|c| project(*c)).collect();
+            if two_sided(e as u32) && el.normal.dot(el.centroid - cam.eye) > 0.0 {
+                return out;
+            }
+            let (c, n) = el.corners(&mesh.positions);
+            // (triangle corners, their element parameters)
+            let tris: [([usize; 3], [DVec2; 3]); 2] = if n == 4 {
+                [
+                    ([0, 1, 2], [DVec2::new(0.0, 0.0), DVec2::new(1.0, 0.0), DVec2::new(1.0, 1.0)]),
+                    ([0, 2, 3], [DVec2::new(0.0, 0.0), DVec2::new(1.0, 1.0), DVec2::new(0.0, 1.0)]),
+                ]
+            } else {
+                [([0, 1, 2], [DVec2::ZERO, DVec2::X, DVec2::Y]); 2]
+            };
+            for (ti, (idx, uvs)) in tris.iter().enumerate() {
+                if n == 3 && ti == 1 {
+                    break;
+                }
+                let cs: [DVec3; 3] = idx.map(|k| {
+                    let d = c[k] - cam.eye;
+                    DVec3::new(d.dot(right), d.dot(up), d.dot(fwd))
+                });
+                // Clip against z >= z_near (Sutherland–Hodgman); at most 4 vertices remain.
+                let mut poly: Vec<(DVec3, DVec2)> = Vec::with_capacity(4);
+                for k in 0..3 {
+                    let (a, b) = (cs[k], cs[(k + 1) % 3]);
+                    let (ua, ub) = (uvs[k], uvs[(k + 1) % 3]);
+                    let (ina, inb) = (a.z >= z_near, b.z >= z_near);
+                    if ina {
+                        poly.push((a, ua));
+                    }
+                    if ina != inb {
+                        let t = (z_near - a.z) / (b.z - a.z);
+                        poly.push((a + (b - a) * t, ua + (ub - ua) * t));
+                    }
+                }
+                if poly.len() < 3 {
+                    continue;
+                }
+                let pr: Vec<(DVec2, f64, DVec2)> = poly
+                    .iter()
+                    .map(|(q, uv)| {
+                        let iz = 1.0 / q.z;
+                        let x = (q.x * iz * sx_scale + 1.0) * 0.5 * wf;
+                        let y = (1.0 - q.y * iz * sy_scale) * 0.5 * hf;
+                        (DVec2::new(x, y), iz, *uv * iz)
+                    })
+                    .collect();
                 for k in 1..pr.len() - 1 {
-                    let p = [pr[0].0, pr[k].0, pr[k + 1].0];
-                    let ymin = p.iter().map(|q| q.y).fold(f64::INFINITY, f64::min);
-                    let ymax = p.iter().map(|q| q.y).fold(f64::NEG_INFINITY, f64::max);
+                    let v = [pr[0], pr[k], pr[k + 1]];
+                    let ymin = v.iter().map(|q| q.0.y).fold(f64::INFINITY, f64::min);
+                    let ymax = v.iter().map(|q| q.0.y).fold(f64::NEG_INFINITY, f64::max);
                     if ymax < 0.0 || ymin > hf || !ymin.is_finite() || !ymax.is_finite() {
                         continue;
                     }
                     out.push(ScreenTri {
-                        p,
-                        inv_z: [pr[0].1, pr[k].1, pr[k + 1].1],
-                        element: e,
+                        p: [v[0].0, v[1].0, v[2].0],
+                        inv_z: [v[0].1, v[1].1, v[2].1],
+                        uv_z: [v[0].2, v[1].2, v[2].2],
+                        element: e as u32,
                         ymin: ymin.max(0.0).floor() as usize,
                         ymax: (ymax.ceil() as usize).min(height),
                     });
@@ -116,15 +139,21 @@ pub fn rasterize(
     let nb = height.div_ceil(band);
     let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nb];
     for (k, t) in screen.iter().enumerate() {
-        for b in (t.ymin / band)..=((t.ymax.saturating_sub(1)) / band).min(nb - 1) {
+        if t.ymax <= t.ymin {
+            continue;
+        }
+        for b in (t.ymin / band)..=((t.ymax - 1) / band).min(nb - 1) {
             bins[b].push(k as u32);
         }
     }
     let mut ids = vec![u32::MAX; width * height];
-    ids.par_chunks_mut(width * band).enumerate().for_each(|(b, chunk)| {
+    let mut uv = vec![[0f32; 2]; width * height];
+    ids.par_chunks_mut(width * band).zip(uv.par_chunks_mut(width * band)).enumerate().for_each(|(b, (chunk, uvc))| {
         let y0 = b * band;
         let rows = chunk.len() / width;
         let mut depth = vec![0.0f64; chunk.len()];
+        let mut bary = vec![[0f64; 3]; chunk.len()];
+        let mut owner = vec![u32::MAX; chunk.len()];
         for &k in &bins[b] {
             let t = &screen[k as usize];
             let [a, bb, c] = t.p;
@@ -152,10 +181,24 @@ pub fn rasterize(
                     if iz > depth[idx] {
                         depth[idx] = iz;
                         chunk[idx] = t.element;
+                        owner[idx] = k;
+                        bary[idx] = [w0, w1, w2];
                     }
                 }
             }
         }
+        // Parameters of the winning triangle only (perspective-correct).
+        for idx in 0..chunk.len() {
+            let k = owner[idx];
+            if k == u32::MAX {
+                continue;
+            }
+            let t = &screen[k as usize];
+            let [w0, w1, w2] = bary[idx];
+            let iz = w0 * t.inv_z[0] + w1 * t.inv_z[1] + w2 * t.inv_z[2];
+            let q = (t.uv_z[0] * w0 + t.uv_z[1] * w1 + t.uv_z[2] * w2) / iz;
+            uvc[idx] = [q.x as f32, q.y as f32];
+        }
     });
-    IdBuffer { width, height, ids }
+    IdBuffer { width, height, ids, uv }
 }
