@@ -170,7 +170,7 @@ pub(super) fn compute(
                             if f1 > 0.0 {
                                 approx_far_q += f1;
                                 let v = visibility(c1, j, q, &mut rng, &mut nrays);
-                                row.push((j, f1 * v, true));
+                                row.push((j, f1 * v, true, (size_i / d.max(1e-300)).powi(2)));
                             }
                             continue;
                         }
@@ -189,7 +189,7 @@ pub(super) fn compute(
                         let m = recv_pts.len() as f64;
                         near_excess += unocc / m - f1;
                         if sum > 0.0 {
-                            row.push((j, sum / m, false));
+                            row.push((j, sum / m, false, 0.0));
                         }
                     }
                     if big && approx_far_q > 0.0 {
@@ -203,18 +203,36 @@ pub(super) fn compute(
                         far_sum += approx_far_q;
                     }
                 }
-                let mut alpha = if far_sum > 0.0 { (1.0 - near_excess / far_sum).clamp(0.5, 1.5) } else { 1.0 };
-                // With occlusion the correction is estimated from unoccluded values; never let
-                // it push a row above one (no point sees more than its hemisphere).
-                let (near_vis, far_vis) = row.iter().fold((0.0, 0.0), |(n, f), &(_, v, far)| if far { (n, f + v) } else { (n + v, f) });
-                if near_vis + alpha * far_vis > 1.0 && far_vis > 0.0 {
-                    alpha = ((1.0 - near_vis) / far_vis).max(0.0);
+                // The excess D is taken from the far field in proportion to F_ij·(s_i/d_ij)²:
+                // the difference between an element's mean and its centroid value is a
+                // second-order term, so nearer parts of the far field give it up and a
+                // distant light barely does (a uniform scale would dim direct light near
+                // every corner).
+                let _ = far_sum;
+                let wsum: f64 = row.iter().filter(|e| e.2).map(|e| e.1 * e.3).sum();
+                let near_vis: f64 = row.iter().filter(|e| !e.2).map(|e| e.1).sum();
+                let far_vis: f64 = row.iter().filter(|e| e.2).map(|e| e.1).sum();
+                let scale_far = |e: &(u32, f64, bool, f64)| -> f64 {
+                    if !e.2 {
+                        return e.1;
+                    }
+                    if wsum > 0.0 {
+                        e.1 * (1.0 - near_excess * e.3 / wsum).clamp(0.0, 2.0)
+                    } else {
+                        e.1
+                    }
+                };
+                let mut out: Vec<(u32, f32)> = row.iter().map(|e| (e.0, scale_far(e))).map(|(j, v)| (j, v as f32)).filter(|e| e.1 > 0.0).collect();
+                // Never let the correction push a row above one (no point sees more than its
+                // hemisphere).
+                let total: f64 = out.iter().map(|e| e.1 as f64).sum();
+                if total > 1.0 && far_vis > 0.0 {
+                    let k = ((1.0 - near_vis) / (total - near_vis)).max(0.0);
+                    let near: std::collections::HashSet<u32> = row.iter().filter(|e| !e.2).map(|e| e.0).collect();
+                    for e in out.iter_mut().filter(|e| !near.contains(&e.0)) {
+                        e.1 = (e.1 as f64 * k) as f32;
+                    }
                 }
-                let mut out: Vec<(u32, f32)> = row
-                    .iter()
-                    .map(|&(j, f, far)| (j, if far { f * alpha } else { f } as f32))
-                    .filter(|e| e.1 > 0.0)
-                    .collect();
                 ray_count.fetch_add(nrays, Ordering::Relaxed);
                 progress.advance(1);
                 out.sort_unstable_by_key(|e| e.0);
