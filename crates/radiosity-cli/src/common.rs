@@ -85,7 +85,13 @@ impl SolveFlags {
                 ..Default::default()
             },
             solver,
-            solve: radiosity::solve::Options { tolerance: self.tolerance, max_iterations: self.max_iterations, time_budget },
+            solve: radiosity::solve::Options {
+                tolerance: self.tolerance,
+                max_iterations: self.max_iterations,
+                time_budget,
+                seed: self.seed,
+                ..Default::default()
+            },
         })
     }
 

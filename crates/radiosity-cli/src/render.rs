@@ -120,8 +120,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         eprintln!(
             "{} elements, {} form factors ({} rays), {} {} iterations, residual {:.2e} ({:?})",
             solved.mesh.len(),
-            solved.ff_stats.nonzeros,
-            solved.ff_stats.rays,
+            solved.ff_stats.as_ref().map_or(0, |f| f.nonzeros),
+            solved.ff_stats.as_ref().map_or(0, |f| f.rays),
             stats.solver,
             stats.iterations,
             stats.residual,
