@@ -76,22 +76,21 @@ pub fn element_materials(scene: &Scene, mesh: &Mesh) -> (Vec<Rgb>, Vec<Rgb>) {
         .unzip()
 }
 
-/// Everything up to the solver: mesh, rays, and the form factors (deterministic solvers)
-/// or the element tracer (stochastic solvers).
+/// Everything up to the solver: mesh, rays, and the form factors (deterministic solvers
+/// only; the stochastic ones cast rays instead).
 struct Prepared {
     scene: Scene,
     mesh: Mesh,
     rays: SceneRays,
     transport: Option<SparseRows>,
     ff_stats: Option<form_factor::Stats>,
-    tracer: Option<ElementTracer>,
     reflectance: Vec<Rgb>,
     emission: Vec<Rgb>,
     area: Vec<f64>,
     timings: Timings,
 }
 
-fn prepare(scene: Scene, settings: &Settings, form_factors: bool, tracer: bool, progress: &dyn Progress) -> Result<Prepared> {
+fn prepare(scene: Scene, settings: &Settings, form_factors: bool, progress: &dyn Progress) -> Result<Prepared> {
     let mut timings = Timings::default();
     let t = Instant::now();
     let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
@@ -100,7 +99,6 @@ fn prepare(scene: Scene, settings: &Settings, form_factors: bool, tracer: bool, 
 
     let t = Instant::now();
     let rays = SceneRays::new(&scene.polygons);
-    let tracer = tracer.then(|| ElementTracer::new(&mesh));
     timings.bvh = t.elapsed().as_secs_f64();
 
     let (transport, ff_stats) = if form_factors {
@@ -113,7 +111,7 @@ fn prepare(scene: Scene, settings: &Settings, form_factors: bool, tracer: bool, 
     };
     let (reflectance, emission) = element_materials(&scene, &mesh);
     let area: Vec<f64> = mesh.elements.iter().map(|e| e.area).collect();
-    Ok(Prepared { scene, mesh, rays, transport, ff_stats, tracer, reflectance, emission, area, timings })
+    Ok(Prepared { scene, mesh, rays, transport, ff_stats, reflectance, emission, area, timings })
 }
 
 impl Prepared {
@@ -128,8 +126,7 @@ impl Prepared {
             None => None,
         };
         if solver.is_stochastic() {
-            let tracer = self.tracer.as_ref().ok_or_else(|| Error::Invalid("stochastic solve without a tracer".into()))?;
-            let sys = RaySystem { mesh, tracer, reflectance: &self.reflectance, emission: &self.emission };
+            let sys = RaySystem { mesh, rays: &self.rays, reflectance: &self.reflectance, emission: &self.emission };
             solve::stochastic::solve(solver, &sys, opts, progress, observer)
         } else {
             let transport = self.transport.as_ref().ok_or_else(|| Error::Invalid("solve without form factors".into()))?;
@@ -171,7 +168,7 @@ pub fn solve_scene_observed(
     observer: Option<&mut FrameObserver<'_>>,
 ) -> Result<Solved> {
     let stochastic = settings.solver.is_stochastic();
-    let prepared = prepare(scene, settings, !stochastic, stochastic, progress)?;
+    let prepared = prepare(scene, settings, !stochastic, progress)?;
     let t = Instant::now();
     let solution = prepared.solve(settings.solver, &settings.solve, progress, observer)?;
     let seconds = t.elapsed().as_secs_f64();
@@ -203,7 +200,7 @@ pub struct Comparison {
 /// (`settings.solver` is ignored), for comparison. After an interrupt the solver running
 /// keeps what it has and the remaining ones are skipped.
 pub fn solve_all(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Comparison> {
-    let prepared = prepare(scene, settings, true, true, progress)?;
+    let prepared = prepare(scene, settings, true, progress)?;
     let mut runs = Vec::new();
     let mut seconds = 0.0;
     for solver in Solver::ALL {

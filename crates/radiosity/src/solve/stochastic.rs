@@ -8,7 +8,10 @@
 //! call; at least one ray for every element with power), each ray carrying `Φ_j / n_j`
 //! from an area-uniform point of `j` in a cosine-distributed direction. The first element
 //! hit (front side) receives the ray's power; a ray that hits nothing or the back of a
-//! one-sided surface has escaped. The expected power arriving at `i` is `Σ_j Φ_j F_ji`
+//! one-sided surface has escaped. Rays are cast against the scene's polygons
+//! ([`SceneRays`], a few triangles per input polygon, so the cost does not grow with the
+//! number of elements) and the element is then found inside the polygon hit with a small
+//! uniform grid per patch ([`Locator`]). The expected power arriving at `i` is `Σ_j Φ_j F_ji`
 //! for any choice of `n_j ≥ 1`, so the estimate is unbiased, and all of `Φ` is sent, so
 //! power is conserved exactly.
 //!
@@ -25,14 +28,13 @@
 
 use std::borrow::Cow;
 
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use rand::RngExt;
 use rayon::prelude::*;
 
 use super::{EnergyBalance, Monitor, Observer, Options, Solution, Solver};
-use crate::accel::Ray;
+use crate::accel::SceneRays;
 use crate::mesh::Mesh;
-use crate::render::gouraud::ElementTracer;
 use crate::sampling::{basis, cosine_hemisphere, mix64, rng_for};
 use crate::{luminance, Error, Progress, Result, Rgb};
 
@@ -43,13 +45,13 @@ pub const BATCH: u64 = 1024;
 /// Batches traced per parallel pass between interrupt checks.
 const GROUP: u64 = 64;
 
-/// What the stochastic solvers work on: the elements, ray casting against them, and the
-/// materials.
+/// What the stochastic solvers work on: the elements, ray casting against the scene's
+/// polygons (whose indices are the mesh's patches), and the materials.
 pub struct RaySystem<'a> {
     /// The elements.
     pub mesh: &'a Mesh,
-    /// Closest-hit queries against the element triangles.
-    pub tracer: &'a ElementTracer,
+    /// Closest-hit queries against the scene's polygons.
+    pub rays: &'a SceneRays,
     /// Reflectance ρ per element.
     pub reflectance: &'a [Rgb],
     /// Emitted exitance E = π·L_e per element.
@@ -109,6 +111,7 @@ pub(crate) struct Deposit {
 /// Casts the rays of [`Deposit`]s.
 pub(crate) struct Shooter<'a> {
     sys: &'a RaySystem<'a>,
+    locator: Locator,
     seed: u64,
     /// Origin offset along the normal, against self-intersection at shared edges.
     eps: f64,
@@ -122,7 +125,7 @@ impl<'a> Shooter<'a> {
             hi = hi.max(*p);
         }
         let diag = if lo.x <= hi.x { (hi - lo).length() } else { 1.0 };
-        Shooter { sys, seed, eps: 1e-5 * diag }
+        Shooter { sys, locator: Locator::new(sys.mesh), seed, eps: 1e-5 * diag }
     }
 
     /// Sends `power[j]` from every element along about `rays` rays (see the module docs);
@@ -193,7 +196,6 @@ impl<'a> Shooter<'a> {
     /// Traces batch `k`: (sender, receiver or u32::MAX) per ray, in ray order.
     fn trace_batch(&self, k: u64, first: &[u64], total: u64, stream_seed: u64) -> Vec<(u32, u32)> {
         let mesh = self.sys.mesh;
-        let tracer = self.sys.tracer;
         let (start, end) = (k * BATCH, ((k + 1) * BATCH).min(total));
         let mut rng = rng_for(stream_seed, k);
         let mut out = Vec::with_capacity((end - start) as usize);
@@ -210,15 +212,12 @@ impl<'a> Shooter<'a> {
             let d = cosine_hemisphere(u1, u2);
             let dir = t * d.x + b * d.y + e.normal * d.z;
             let origin = x + e.normal * self.eps;
-            let ray = Ray::new(origin.as_vec3(), dir.as_vec3(), 0.0, f32::INFINITY);
-            let patch = e.patch;
             // A planar patch cannot be hit by a ray leaving its front side.
-            let hit = tracer.bvh().intersect_filtered(&ray, |prim| mesh.elements[tracer.owner(prim) as usize].patch == patch);
-            let receiver = match hit {
-                Some(h) => {
-                    let i = tracer.owner(h.prim);
-                    if mesh.elements[i as usize].normal.dot(dir) < 0.0 {
-                        i
+            let receiver = match self.sys.rays.closest(origin.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch)) {
+                Some((h, patch)) => {
+                    let normal = mesh.elements[mesh.patches[patch as usize].first as usize].normal;
+                    if normal.dot(dir) < 0.0 {
+                        self.locator.locate(mesh, patch, origin + dir * h.t as f64)
                     } else {
                         u32::MAX
                     }
@@ -228,6 +227,125 @@ impl<'a> Shooter<'a> {
             out.push((j as u32, receiver));
         }
         out
+    }
+}
+
+/// Finds the element of a patch that contains a point on the patch: a uniform grid per
+/// patch in the patch's plane, each cell listing the elements whose bounds overlap it, and
+/// a point-in-convex-polygon test (the least violated element wins, for points on edges).
+pub(crate) struct Locator {
+    patches: Vec<PatchGrid>,
+}
+
+struct PatchGrid {
+    origin: DVec3,
+    axes: (DVec3, DVec3),
+    lo: DVec2,
+    inv_cell: DVec2,
+    nx: usize,
+    ny: usize,
+    /// Cell c lists `items[cell_start[c]..cell_start[c + 1]]`.
+    cell_start: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Locator {
+    pub(crate) fn new(mesh: &Mesh) -> Self {
+        let patches = mesh
+            .patches
+            .iter()
+            .map(|pe| {
+                let elems = pe.first..pe.first + pe.count;
+                let Some(e0) = mesh.elements.get(pe.first as usize) else {
+                    return PatchGrid { origin: DVec3::ZERO, axes: (DVec3::X, DVec3::Y), lo: DVec2::ZERO, inv_cell: DVec2::ONE, nx: 1, ny: 1, cell_start: vec![0, 0], items: Vec::new() };
+                };
+                let origin = mesh.positions[e0.vertices[0] as usize];
+                let axes = basis(e0.normal);
+                let to2 = |p: DVec3| DVec2::new((p - origin).dot(axes.0), (p - origin).dot(axes.1));
+                let bounds: Vec<(DVec2, DVec2)> = elems
+                    .clone()
+                    .map(|k| {
+                        let (c, n) = mesh.elements[k as usize].corners(&mesh.positions);
+                        c[..n].iter().fold((DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)), |(lo, hi), p| {
+                            (lo.min(to2(*p)), hi.max(to2(*p)))
+                        })
+                    })
+                    .collect();
+                let lo = bounds.iter().fold(DVec2::splat(f64::INFINITY), |m, b| m.min(b.0));
+                let hi = bounds.iter().fold(DVec2::splat(f64::NEG_INFINITY), |m, b| m.max(b.1));
+                let size = (hi - lo).max(DVec2::splat(1e-300));
+                let count = pe.count.max(1) as f64;
+                let nx = ((count * size.x / size.y).sqrt().ceil() as usize).clamp(1, 1024);
+                let ny = ((count / nx as f64).ceil() as usize).clamp(1, 1024);
+                let inv_cell = DVec2::new(nx as f64 / size.x, ny as f64 / size.y);
+                let cell_of = |p: DVec2| {
+                    let c = (p - lo) * inv_cell;
+                    ((c.x.max(0.0) as usize).min(nx - 1), (c.y.max(0.0) as usize).min(ny - 1))
+                };
+                let mut lists: Vec<Vec<u32>> = vec![Vec::new(); nx * ny];
+                for (k, b) in elems.zip(&bounds) {
+                    let (x0, y0) = cell_of(b.0);
+                    let (x1, y1) = cell_of(b.1);
+                    for y in y0..=y1 {
+                        for x in x0..=x1 {
+                            lists[y * nx + x].push(k);
+                        }
+                    }
+                }
+                let mut cell_start = Vec::with_capacity(nx * ny + 1);
+                let mut items = Vec::new();
+                cell_start.push(0);
+                for l in lists {
+                    items.extend(l);
+                    cell_start.push(items.len() as u32);
+                }
+                PatchGrid { origin, axes, lo, inv_cell, nx, ny, cell_start, items }
+            })
+            .collect();
+        Locator { patches }
+    }
+
+    /// The element of `patch` containing `p` (or the nearest, for points a rounding error
+    /// outside every element).
+    pub(crate) fn locate(&self, mesh: &Mesh, patch: u32, p: DVec3) -> u32 {
+        let g = &self.patches[patch as usize];
+        let to2 = |q: DVec3| DVec2::new((q - g.origin).dot(g.axes.0), (q - g.origin).dot(g.axes.1));
+        let q = to2(p);
+        let c = (q - g.lo) * g.inv_cell;
+        let (x, y) = ((c.x.max(0.0) as usize).min(g.nx - 1), (c.y.max(0.0) as usize).min(g.ny - 1));
+        let cell = y * g.nx + x;
+        let candidates = &g.items[g.cell_start[cell] as usize..g.cell_start[cell + 1] as usize];
+        let pe = mesh.patches[patch as usize];
+        let all: Vec<u32>;
+        let candidates = if candidates.is_empty() {
+            all = (pe.first..pe.first + pe.count).collect();
+            &all[..]
+        } else {
+            candidates
+        };
+        let mut best = (f64::INFINITY, candidates[0]);
+        for &k in candidates {
+            let (corners, n) = mesh.elements[k as usize].corners(&mesh.positions);
+            let v = corners.map(to2);
+            // Signed area decides the orientation in this projection.
+            let area2: f64 = (0..n).map(|i| v[i].perp_dot(v[(i + 1) % n])).sum();
+            let s = area2.signum();
+            let mut worst = f64::NEG_INFINITY;
+            for i in 0..n {
+                let (a, b) = (v[i], v[(i + 1) % n]);
+                let e = b - a;
+                // Distance outside edge i (positive outside).
+                let d = -s * e.perp_dot(q - a) / e.length().max(1e-300);
+                worst = worst.max(d);
+            }
+            if worst <= 0.0 {
+                return k;
+            }
+            if worst < best.0 {
+                best = (worst, k);
+            }
+        }
+        best.1
     }
 }
 

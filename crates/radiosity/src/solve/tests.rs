@@ -15,7 +15,6 @@ use crate::accel::SceneRays;
 use crate::mesh::{mesh_uniform, Mesh};
 use crate::pipeline::element_materials;
 use crate::progress::StopFlag;
-use crate::render::gouraud::ElementTracer;
 use crate::scene::{builtin, Scene};
 use crate::{form_factor, NoProgress};
 
@@ -376,8 +375,8 @@ fn time_budget_stops_every_solver() {
 // ---- stochastic solvers ----
 
 fn ray_solve(f: &Fixture, solver: Solver, rays: u64, seed: u64, tolerance: f64) -> Solution {
-    let tracer = ElementTracer::new(&f.mesh);
-    let sys = RaySystem { mesh: &f.mesh, tracer: &tracer, reflectance: &f.rho, emission: &f.emission };
+    let scene_rays = SceneRays::new(&f.scene.polygons);
+    let sys = RaySystem { mesh: &f.mesh, rays: &scene_rays, reflectance: &f.rho, emission: &f.emission };
     let opts = Options { tolerance, seed, rays: Some(rays), max_iterations: 200, ..Default::default() };
     stochastic::solve(solver, &sys, &opts, &NoProgress, None).unwrap()
 }
@@ -456,5 +455,18 @@ fn stochastic_results_do_not_depend_on_the_thread_count() {
         assert_eq!(a.stats.rays, b.stats.rays);
         let c = ray_solve(f, s, 100_000, 4, 1e-3);
         assert_ne!(a.radiosity, c.radiosity, "{s}: the seed changes nothing");
+    }
+}
+
+#[test]
+fn locator_finds_the_element_of_points_on_every_patch() {
+    for f in [cornell(), open_box()] {
+        let loc = stochastic::Locator::new(&f.mesh);
+        for (k, e) in f.mesh.elements.iter().enumerate() {
+            for (u, v) in [(0.5, 0.5), (0.01, 0.02), (0.97, 0.9), (0.3, 0.99)] {
+                let p = e.point(&f.mesh.positions, u, v);
+                assert_eq!(loc.locate(&f.mesh, e.patch, p), k as u32, "element {k} at ({u}, {v})");
+            }
+        }
     }
 }
