@@ -235,6 +235,10 @@ impl<'a> Shooter<'a> {
 /// a point-in-convex-polygon test (the least violated element wins, for points on edges).
 pub(crate) struct Locator {
     patches: Vec<PatchGrid>,
+    /// Per element, its edges in its patch's plane: outward unit normal and offset, so
+    /// that `normal·q − offset` is the distance of q outside the edge (unused edges of
+    /// triangles repeat the first).
+    edges: Vec<[(DVec2, f64); 4]>,
 }
 
 struct PatchGrid {
@@ -251,6 +255,7 @@ struct PatchGrid {
 
 impl Locator {
     pub(crate) fn new(mesh: &Mesh) -> Self {
+        let mut edges = vec![[(DVec2::ZERO, 0.0); 4]; mesh.len()];
         let patches = mesh
             .patches
             .iter()
@@ -271,6 +276,23 @@ impl Locator {
                         })
                     })
                     .collect();
+                for k in elems.clone() {
+                    let (c, n) = mesh.elements[k as usize].corners(&mesh.positions);
+                    let v = c.map(to2);
+                    // Signed area decides the orientation in this projection.
+                    let s = (0..n).map(|i| v[i].perp_dot(v[(i + 1) % n])).sum::<f64>().signum();
+                    let mut out = [(DVec2::ZERO, 0.0); 4];
+                    for i in 0..4 {
+                        let (a, b) = (v[i % n], v[(i + 1) % n]);
+                        let e = b - a;
+                        let normal = DVec2::new(e.y, -e.x) * s / e.length().max(1e-300);
+                        out[i] = (normal, normal.dot(a));
+                    }
+                    if n == 3 {
+                        out[3] = out[0];
+                    }
+                    edges[k as usize] = out;
+                }
                 let lo = bounds.iter().fold(DVec2::splat(f64::INFINITY), |m, b| m.min(b.0));
                 let hi = bounds.iter().fold(DVec2::splat(f64::NEG_INFINITY), |m, b| m.max(b.1));
                 let size = (hi - lo).max(DVec2::splat(1e-300));
@@ -302,7 +324,7 @@ impl Locator {
                 PatchGrid { origin, axes, lo, inv_cell, nx, ny, cell_start, items }
             })
             .collect();
-        Locator { patches }
+        Locator { patches, edges }
     }
 
     /// The element of `patch` containing `p` (or the nearest, for points a rounding error
@@ -325,19 +347,7 @@ impl Locator {
         };
         let mut best = (f64::INFINITY, candidates[0]);
         for &k in candidates {
-            let (corners, n) = mesh.elements[k as usize].corners(&mesh.positions);
-            let v = corners.map(to2);
-            // Signed area decides the orientation in this projection.
-            let area2: f64 = (0..n).map(|i| v[i].perp_dot(v[(i + 1) % n])).sum();
-            let s = area2.signum();
-            let mut worst = f64::NEG_INFINITY;
-            for i in 0..n {
-                let (a, b) = (v[i], v[(i + 1) % n]);
-                let e = b - a;
-                // Distance outside edge i (positive outside).
-                let d = -s * e.perp_dot(q - a) / e.length().max(1e-300);
-                worst = worst.max(d);
-            }
+            let worst = self.edges[k as usize].iter().map(|(n, c)| n.dot(q) - c).fold(f64::NEG_INFINITY, f64::max);
             if worst <= 0.0 {
                 return k;
             }
