@@ -1,7 +1,7 @@
 //! The pipeline end to end, as the program runs it: scene → mesh → rays → form factors →
 //! solve → reconstruct → render. Tests call these functions so that they test what users
-//! run. The stochastic solvers skip the form factors (they cast rays against the elements
-//! instead); [`solve_all`] runs every solver on one mesh and one set of form factors.
+//! run. The stochastic solvers skip the form factors (they cast rays against the scene's
+//! polygons instead); [`solve_all`] runs every solver on one mesh and one set of form factors.
 
 use std::time::Instant;
 

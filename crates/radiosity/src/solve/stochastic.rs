@@ -11,7 +11,7 @@
 //! one-sided surface has escaped. Rays are cast against the scene's polygons
 //! ([`SceneRays`], a few triangles per input polygon, so the cost does not grow with the
 //! number of elements) and the element is then found inside the polygon hit with a small
-//! uniform grid per patch ([`Locator`]). The expected power arriving at `i` is `Σ_j Φ_j F_ji`
+//! uniform grid per patch (`Locator`). The expected power arriving at `i` is `Σ_j Φ_j F_ji`
 //! for any choice of `n_j ≥ 1`, so the estimate is unbiased, and all of `Φ` is sent, so
 //! power is conserved exactly.
 //!
