@@ -83,23 +83,13 @@ fn draw(buf: &mut [u8], title: &str, series: &[Series], width: u32, height: u32)
         .label_style(("sans-serif", 14))
         .draw()?;
     chart.draw_series(LineSeries::new([(t_min, 1e-3), (t_max, 1e-3)], ShapeStyle::from(RGBColor(160, 160, 160)).stroke_width(1)))?;
-    for (k, (s, pts)) in series.iter().zip(&by_time).enumerate() {
+    for (k, pts) in by_time.iter().enumerate() {
         let c = COLOURS[k % COLOURS.len()];
-        chart
-            .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?
-            .label(&s.label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        chart.draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?;
         if pts.len() <= 2 {
             chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
         }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 14))
-        .draw()?;
 
     // Right: against sweeps.
     let mut chart = ChartBuilder::on(&right)
@@ -115,13 +105,24 @@ fn draw(buf: &mut [u8], title: &str, series: &[Series], width: u32, height: u32)
         .label_style(("sans-serif", 14))
         .draw()?;
     chart.draw_series(LineSeries::new([(0.0, 1e-3), (s_max, 1e-3)], ShapeStyle::from(RGBColor(160, 160, 160)).stroke_width(1)))?;
-    for (k, pts) in by_sweep.iter().enumerate() {
+    // The legend sits top right of this panel, where the lines have already fallen.
+    for (k, (s, pts)) in series.iter().zip(&by_sweep).enumerate() {
         let c = COLOURS[k % COLOURS.len()];
-        chart.draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?;
+        chart
+            .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?
+            .label(&s.label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
         if pts.len() <= 2 {
             chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, c.filled())))?;
         }
     }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .draw()?;
     root.present()?;
     Ok(())
 }
