@@ -189,6 +189,7 @@ fn every_deterministic_solver_agrees_with_direct_on_a_reciprocal_operator() {
         let sol = solve(s, &sys, &tight(), &NoProgress).unwrap();
         assert_eq!(sol.stats.stop, StopReason::Converged, "{s}");
         let d = max_relative_difference(&sol.radiosity, &direct.radiosity);
+        eprintln!("reciprocal F, {s}: max relative difference from direct {d:.2e}");
         assert!(d <= 1e-5, "{s}: max relative difference from direct {d:.3e}");
     }
 }
@@ -201,11 +202,13 @@ fn gathering_solvers_agree_with_direct_on_the_point_sampled_operator() {
     for s in [Solver::Jacobi, Solver::GaussSeidel, Solver::Progressive] {
         let sol = solve(s, &sys, &tight(), &NoProgress).unwrap();
         let d = max_relative_difference(&sol.radiosity, &direct.radiosity);
+        eprintln!("point-sampled F, {s}: max relative difference from direct {d:.2e}");
         assert!(d <= 1e-5, "{s}: max relative difference from direct {d:.3e}");
     }
     // Shooting solves the reciprocity-transposed system: close, not equal.
     let shooting = solve(Solver::Shooting, &sys, &tight(), &NoProgress).unwrap();
     let d = relative_difference(&f.area, &shooting.radiosity, &direct.radiosity);
+    eprintln!("point-sampled F, shooting: relative RMS difference from direct {d:.2e}");
     assert!(d > 1e-6 && d < 0.02, "shooting vs direct on a non-reciprocal F: {d:.3e}");
 }
 
@@ -218,6 +221,7 @@ fn furnace_every_deterministic_solver_gives_e_over_one_minus_rho() {
         for s in DETERMINISTIC {
             let sol = solve(s, &sys, &Options { tolerance: 1e-10, ..tight() }, &NoProgress).unwrap();
             let worst = sol.radiosity.iter().map(|b| ((*b - Rgb::splat(exact)).abs() / exact).max_element()).fold(0.0, f64::max);
+            eprintln!("furnace, {s}: max relative error of B {worst:.2e}, imbalance {:.1e}", sol.energy.relative_imbalance());
             assert!(worst <= 1e-6, "{s}: furnace B off by {worst:.3e} relative");
             // A closed box: nothing escapes, and what is emitted is absorbed.
             let e = &sol.energy;
@@ -264,6 +268,7 @@ fn gauss_seidel_needs_fewer_sweeps_than_jacobi() {
     let j = solve(Solver::Jacobi, &sys, &opts, &NoProgress).unwrap();
     let gs = solve(Solver::GaussSeidel, &sys, &opts, &NoProgress).unwrap();
     assert_eq!(gs.stats.stop, StopReason::Converged);
+    eprintln!("to 1e-6: Gauss-Seidel {} sweeps, Jacobi {}", gs.stats.iterations, j.stats.iterations);
     assert!(gs.stats.iterations < j.stats.iterations, "Gauss–Seidel {} sweeps, Jacobi {}", gs.stats.iterations, j.stats.iterations);
     // And its residual bookkeeping is the true residual of its iterate.
     let true_residual = sys.residual(&gs.radiosity);
@@ -278,6 +283,7 @@ fn shooting_conserves_power() {
     for max_iterations in [1, 3, 100_000] {
         let sol = solve(Solver::Shooting, &sys, &Options { max_iterations, ..tight() }, &NoProgress).unwrap();
         let e = &sol.energy;
+        eprintln!("shooting, {max_iterations} sweeps: imbalance {:.1e}", e.relative_imbalance());
         assert!(e.relative_imbalance() <= 1e-9, "after {max_iterations} sweeps: imbalance {:.3e}", e.relative_imbalance());
         // The Cornell box is open at the front: some power escapes.
         assert!(e.escaped.min_element() > 0.01 * e.emitted.min_element());
