@@ -29,7 +29,8 @@ pub struct SolveFlags {
     /// Visibility rays per receiver point (n × n).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub visibility_samples: usize,
-    /// Solver.
+    /// Solver: direct, jacobi, gauss-seidel, shooting, progressive, stochastic-jacobi,
+    /// stochastic-shooting, or (solve only) all.
     #[arg(long, value_name = "NAME", default_value = "jacobi")]
     pub solver: String,
     /// Stop when the relative power residual is at most this.
@@ -41,6 +42,10 @@ pub struct SolveFlags {
     /// Stop solving after this many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub time_budget: Option<f64>,
+    /// Stochastic solvers: rays per iteration for the full emitted power [default: 500 per
+    /// element, at least 200 000].
+    #[arg(long, value_name = "N")]
+    pub rays: Option<u64>,
     /// Treat every surface as two-sided.
     #[arg(long)]
     pub two_sided: bool,
@@ -78,7 +83,15 @@ impl SolveFlags {
             None => None,
         };
         let method: form_factor::Method = self.form_factors.parse()?;
-        let solver: Solver = self.solver.parse()?;
+        // `all` is a mode of `solve`, not a solver: the settings then carry a placeholder.
+        let solver: Solver = if self.all_solvers() {
+            Solver::Jacobi
+        } else {
+            self.solver.parse().map_err(|e| anyhow::anyhow!("{e}, or all (solve only)"))?
+        };
+        if self.rays == Some(0) {
+            bail!("--rays must be at least 1");
+        }
         Ok(Settings {
             mesh_size: self.mesh_size,
             form_factors: form_factor::Options {
@@ -88,9 +101,21 @@ impl SolveFlags {
                 ..Default::default()
             },
             solver,
-            solve: radiosity::solve::Options { tolerance: self.tolerance, max_iterations: self.max_iterations, time_budget },
+            solve: radiosity::solve::Options {
+                tolerance: self.tolerance,
+                max_iterations: self.max_iterations,
+                time_budget,
+                seed: self.seed,
+                rays: self.rays,
+                ..Default::default()
+            },
             max_elements: self.max_elements,
         })
+    }
+
+    /// True for `--solver all` (every solver, for comparison).
+    pub fn all_solvers(&self) -> bool {
+        self.solver == "all"
     }
 
     /// Configures the global thread pool.
@@ -127,6 +152,21 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
+}
+
+/// One line per term of the energy balance, for the summary on stderr.
+pub fn energy_summary(e: &radiosity::report::EnergyReport) -> String {
+    let lum = |c: [f64; 3]| radiosity::luminance(glam::DVec3::from_array(c));
+    let emitted = lum(e.emitted).max(f64::MIN_POSITIVE);
+    let pct = |c: [f64; 3]| 100.0 * lum(c) / emitted;
+    format!(
+        "energy: emitted {:.4e} = absorbed {:.2} % + escaped {:.2} % + unshot {:.2} % (imbalance {:.1e})",
+        lum(e.emitted),
+        pct(e.absorbed),
+        pct(e.escaped),
+        pct(e.unshot),
+        e.imbalance
+    )
 }
 
 /// The exit code for a run that stopped for `reason`: 130 after an interrupt (outputs were

@@ -6,6 +6,7 @@
 
 mod common;
 mod compare;
+mod plot;
 mod progress;
 mod render;
 mod solve;
@@ -42,8 +43,9 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(code) => code,
+        // Interrupted before any usable result existed (e.g. during form factors).
         Err(e) if matches!(e.downcast_ref::<radiosity::Error>(), Some(radiosity::Error::Cancelled)) => {
-            eprintln!("interrupted before a solution existed (during form factors): no output written");
+            eprintln!("interrupted before a solution existed: nothing written");
             ExitCode::from(130)
         }
         Err(e) => {
