@@ -15,4 +15,4 @@ pub mod bvh;
 mod scene_rays;
 
 pub use bvh::{Bvh, Hit, Ray};
-pub use scene_rays::SceneRays;
+pub use scene_rays::{SceneRays, SEGMENT_EPS};

@@ -1,0 +1,405 @@
+//! `radiosity bench rays`: ray-casting throughput of our BVH ([`radiosity::accel::Bvh`]) on
+//! incoherent rays and — in a build with `--features embree` — of Embree on the very same
+//! rays in the same invocation, so that the ratio means something on a noisy shared machine.
+//!
+//! Two fixed, seeded ray sets per scene, from area-weighted uniform points on the scene's
+//! triangles: closest-hit rays leaving a surface point in a cosine-weighted direction about
+//! its normal (gathering), and segments between two random surface points traced as any-hit
+//! queries (form-factor visibility, as `SceneRays::visible` casts them). Each set is traced
+//! `--runs` times, alternating backends run by run, and the medians are reported. The
+//! visibility path the solver really uses (any-hit with the two end polygons filtered out)
+//! is timed too, for our BVH only: Embree would need a filter callback for it.
+
+use std::path::Path;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::{Args, Subcommand};
+use glam::{DVec3, Vec3};
+use radiosity::accel::{Bvh, Ray, SceneRays};
+use radiosity::sampling::{basis, cosine_hemisphere, mix64, unit_f64};
+use rayon::prelude::*;
+
+/// Flags of `radiosity bench`.
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub what: BenchWhat,
+}
+
+/// What to benchmark.
+#[derive(Subcommand, Debug)]
+pub enum BenchWhat {
+    /// Closest-hit and any-hit rays per second on incoherent rays (and Embree's, when the
+    /// program is built with `--features embree`).
+    Rays(RaysArgs),
+}
+
+/// Flags of `radiosity bench rays`.
+#[derive(Args, Debug)]
+pub struct RaysArgs {
+    /// Scenes: built-in names or files [default: cornell and, when present,
+    /// ../shared/scenes/sponza-dabrovic/sponza.obj and ../shared/scenes/conference/conference.obj].
+    pub scenes: Vec<String>,
+    /// Rays per set (closest-hit and any-hit each).
+    #[arg(long, value_name = "N", default_value_t = 1_000_000)]
+    pub rays: usize,
+    /// Threads tracing (and building).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub threads: usize,
+    /// Timed runs per measurement; the median is reported.
+    #[arg(long, value_name = "N", default_value_t = 5)]
+    pub runs: usize,
+    /// Seed of the ray sets.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Also time Embree's 8-ray packets (rtcIntersect8 / rtcOccluded8) on the same rays
+    /// (with --features embree).
+    #[arg(long)]
+    pub packets: bool,
+    /// Extra Embree device configuration appended to `threads=N`, e.g. `isa=avx2` or
+    /// `verbose=1` (with --features embree).
+    #[arg(long, value_name = "CONFIG", default_value = "")]
+    pub embree_config: String,
+}
+
+const DEFAULT_SCENES: [&str; 3] = [
+    "cornell",
+    "../shared/scenes/sponza-dabrovic/sponza.obj",
+    "../shared/scenes/conference/conference.obj",
+];
+
+/// Rays handed to a pool thread at a time.
+const CHUNK: usize = 1024;
+
+pub fn run(a: BenchArgs) -> Result<ExitCode> {
+    match a.what {
+        BenchWhat::Rays(r) => rays(r),
+    }
+}
+
+fn rays(a: RaysArgs) -> Result<ExitCode> {
+    anyhow::ensure!(a.rays > 0 && a.runs > 0 && a.threads > 0, "--rays, --runs and --threads must be positive");
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads).build()?;
+    let scenes: Vec<String> =
+        if a.scenes.is_empty() { DEFAULT_SCENES.iter().map(|s| s.to_string()).collect() } else { a.scenes.clone() };
+    println!(
+        "bench rays: {} rays per set, {} thread(s), median of {} runs, seed {}; machine: {} ({} cores)",
+        a.rays,
+        a.threads,
+        a.runs,
+        a.seed,
+        cpu_model(),
+        std::thread::available_parallelism().map_or(0, |n| n.get())
+    );
+    if cfg!(not(feature = "embree")) {
+        println!("(built without --features embree: our BVH only)");
+    }
+    for spec in &scenes {
+        let path = Path::new(spec);
+        if path.extension().is_some() && !path.exists() {
+            println!("\nscene {spec}: file not found, skipped");
+            continue;
+        }
+        let scene = radiosity::scene::load_scene(spec).with_context(|| format!("loading {spec}"))?;
+        bench_scene(spec, &scene, &a, &pool)?;
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Fan triangulation of the polygons, as `SceneRays::new` does it, with each triangle's polygon.
+fn triangles(scene: &radiosity::scene::Scene) -> (Vec<[Vec3; 3]>, Vec<u32>) {
+    let mut tris = Vec::new();
+    let mut poly = Vec::new();
+    for (pi, p) in scene.polygons.iter().enumerate() {
+        let v = &p.vertices;
+        for i in 1..v.len().saturating_sub(1) {
+            tris.push([v[0].as_vec3(), v[i].as_vec3(), v[i + 1].as_vec3()]);
+            poly.push(pi as u32);
+        }
+    }
+    (tris, poly)
+}
+
+/// The two ray sets of one scene.
+struct RaySet {
+    /// From a surface point, cosine-weighted about the normal, unit direction, t ∈ (ε, ∞).
+    closest: Vec<Ray>,
+    /// Between two surface points: direction b − a, t ∈ (SEGMENT_EPS, 1 − SEGMENT_EPS).
+    segments: Vec<Ray>,
+    /// The polygons of the segments' end points.
+    segment_polys: Vec<(u32, u32)>,
+}
+
+fn make_rays(tris: &[[Vec3; 3]], tri_poly: &[u32], n: usize, seed: u64, diag: f64) -> RaySet {
+    let mut cdf = Vec::with_capacity(tris.len());
+    let mut total = 0.0f64;
+    for t in tris {
+        let [a, b, c] = t.map(|p| p.as_dvec3());
+        total += 0.5 * (b - a).cross(c - a).length();
+        cdf.push(total);
+    }
+    let u = |i: u64, k: u64| unit_f64(mix64(seed ^ mix64(i.wrapping_mul(8).wrapping_add(k))));
+    // An area-weighted uniform point: (point, triangle).
+    let point = |i: u64, k: u64| -> (DVec3, usize) {
+        let x = u(i, k) * total;
+        let ti = cdf.partition_point(|&c| c <= x).min(tris.len() - 1);
+        let [a, b, c] = tris[ti].map(|p| p.as_dvec3());
+        let (s, r) = (u(i, k + 1).sqrt(), u(i, k + 2));
+        (a * (1.0 - s) + b * (s * (1.0 - r)) + c * (s * r), ti)
+    };
+    let eps = (1e-5 * diag) as f32;
+    let closest = (0..n as u64)
+        .into_par_iter()
+        .map(|i| {
+            let (p, ti) = point(i, 0);
+            let [a, b, c] = tris[ti].map(|p| p.as_dvec3());
+            let nrm = (b - a).cross(c - a).normalize_or(DVec3::Z);
+            let (t, bt) = basis(nrm);
+            let d = cosine_hemisphere(u(i, 3), u(i, 4));
+            let dir = (t * d.x + bt * d.y + nrm * d.z).normalize();
+            Ray::new(p.as_vec3(), dir.as_vec3(), eps, f32::INFINITY)
+        })
+        .collect();
+    let (segments, segment_polys) = (0..n as u64)
+        .into_par_iter()
+        .map(|i| {
+            let (p, ta) = point(n as u64 + i, 0);
+            let (q, tb) = point(n as u64 + i, 3);
+            let eps = radiosity::accel::SEGMENT_EPS;
+            (Ray::new(p.as_vec3(), (q - p).as_vec3(), eps, 1.0 - eps), (tri_poly[ta], tri_poly[tb]))
+        })
+        .unzip();
+    RaySet { closest, segments, segment_polys }
+}
+
+/// Times `f` over every ray on the pool, writing each result; returns seconds.
+fn trace<T: Send>(pool: &rayon::ThreadPool, rays: &[Ray], out: &mut [T], f: impl Fn(usize, &Ray) -> T + Sync) -> f64 {
+    let t = Instant::now();
+    pool.install(|| {
+        out.par_chunks_mut(CHUNK).zip(rays.par_chunks(CHUNK)).enumerate().for_each(|(c, (o, r))| {
+            for (k, (o, r)) in o.iter_mut().zip(r).enumerate() {
+                *o = f(c * CHUNK + k, r);
+            }
+        })
+    });
+    t.elapsed().as_secs_f64()
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Closest-hit result as (t, prim); a miss is (∞, u32::MAX).
+type Closest = (f32, u32);
+const MISS: Closest = (f32::INFINITY, u32::MAX);
+
+fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: &rayon::ThreadPool) -> Result<()> {
+    let (tris, tri_poly) = triangles(scene);
+    let (lo, hi) = scene.bounds();
+    let diag = (hi - lo).length();
+    println!("\nscene {spec}: {} polygons, {} triangles", scene.polygons.len(), tris.len());
+    if tris.is_empty() {
+        println!("  no triangles, skipped");
+        return Ok(());
+    }
+    let set = make_rays(&tris, &tri_poly, a.rays, a.seed, diag);
+    let n = a.rays as f64;
+    let runs = a.runs;
+
+    // Build.
+    let mut ours_build = Vec::new();
+    let mut bvh = Bvh::default();
+    for _ in 0..runs {
+        let t = Instant::now();
+        bvh = pool.install(|| Bvh::build(&tris));
+        ours_build.push(t.elapsed().as_secs_f64());
+    }
+    let ours_build = median(&mut ours_build);
+    let scene_rays = SceneRays::new(&scene.polygons);
+
+    #[cfg(feature = "embree")]
+    let (emb, emb_build, emb_mem) = {
+        let mut times = Vec::new();
+        let mut emb = None;
+        let mut mem = 0;
+        let mut config = format!("threads={}", a.threads);
+        if !a.embree_config.is_empty() {
+            config = format!("{config},{}", a.embree_config);
+        }
+        for run in 0..runs {
+            drop(emb.take());
+            let rss0 = rss_bytes();
+            let t = Instant::now();
+            let e = radiosity_embree::EmbreeScene::build(&tris, &config, radiosity_embree::Quality::Medium)?;
+            times.push(t.elapsed().as_secs_f64());
+            if run == 0 {
+                // Later builds reuse freed pages; only the first growth means something.
+                mem = rss_bytes().saturating_sub(rss0);
+            }
+            emb = Some(e);
+        }
+        let emb = emb.expect("runs > 0");
+        println!("  embree {}", emb.describe());
+        (emb, median(&mut times), mem)
+    };
+
+    print!(
+        "  build      ours {:>9.2} ms  ({} nodes, {:.1} MiB)",
+        ours_build * 1e3,
+        bvh.node_count(),
+        bvh.memory_bytes() as f64 / (1 << 20) as f64
+    );
+    #[cfg(feature = "embree")]
+    print!(
+        " | embree {:>9.2} ms (≈{:.1} MiB RSS) | ours/embree time {:.2}",
+        emb_build * 1e3,
+        emb_mem as f64 / (1 << 20) as f64,
+        ours_build / emb_build
+    );
+    println!();
+
+    // Closest hit.
+    let mut ours_c = vec![MISS; a.rays];
+    let mut t_ours = Vec::new();
+    #[cfg(feature = "embree")]
+    let (mut emb_c, mut t_emb) = (vec![MISS; a.rays], Vec::new());
+    for _ in 0..runs {
+        t_ours.push(trace(pool, &set.closest, &mut ours_c, |_, r| bvh.intersect(r).map_or(MISS, |h| (h.t, h.prim))));
+        #[cfg(feature = "embree")]
+        t_emb.push(trace(pool, &set.closest, &mut emb_c, |_, r| {
+            emb.intersect(&to_embree(r)).map_or(MISS, |h| (h.t, h.prim))
+        }));
+    }
+    let hits = ours_c.iter().filter(|h| h.1 != u32::MAX).count() as f64 / n;
+    let ours_rate = n / median(&mut t_ours) / 1e6;
+    print!("  closest    ours {ours_rate:>9.2} Mrays/s");
+    #[cfg(feature = "embree")]
+    {
+        let emb_rate = n / median(&mut t_emb) / 1e6;
+        let agree = ours_c.iter().zip(&emb_c).filter(|(x, y)| same_hit(**x, **y)).count() as f64 / n;
+        print!(
+            " | embree {emb_rate:>9.2} Mrays/s | ratio {:.2} | hits {:.1} % | agree {:.3} %",
+            ours_rate / emb_rate,
+            hits * 100.0,
+            agree * 100.0
+        );
+    }
+    #[cfg(not(feature = "embree"))]
+    print!(" | hits {:.1} %", hits * 100.0);
+    println!();
+
+    // Any hit on segments.
+    let mut ours_o = vec![false; a.rays];
+    let mut t_ours = Vec::new();
+    #[cfg(feature = "embree")]
+    let (mut emb_o, mut t_emb) = (vec![false; a.rays], Vec::new());
+    for _ in 0..runs {
+        t_ours.push(trace(pool, &set.segments, &mut ours_o, |_, r| bvh.occluded(r)));
+        #[cfg(feature = "embree")]
+        t_emb.push(trace(pool, &set.segments, &mut emb_o, |_, r| emb.occluded(&to_embree(r))));
+    }
+    let blocked = ours_o.iter().filter(|&&b| b).count() as f64 / n;
+    let ours_rate = n / median(&mut t_ours) / 1e6;
+    print!("  any-hit    ours {ours_rate:>9.2} Mrays/s");
+    #[cfg(feature = "embree")]
+    {
+        let emb_rate = n / median(&mut t_emb) / 1e6;
+        let agree = ours_o.iter().zip(&emb_o).filter(|(x, y)| x == y).count() as f64 / n;
+        print!(
+            " | embree {emb_rate:>9.2} Mrays/s | ratio {:.2} | occluded {:.1} % | agree {:.3} %",
+            ours_rate / emb_rate,
+            blocked * 100.0,
+            agree * 100.0
+        );
+    }
+    #[cfg(not(feature = "embree"))]
+    print!(" | occluded {:.1} %", blocked * 100.0);
+    println!();
+
+    // The solver's visibility query: end polygons filtered out.
+    let mut vis = vec![false; a.rays];
+    let mut t_vis = Vec::new();
+    for _ in 0..runs {
+        t_vis.push(trace(pool, &set.segments, &mut vis, |i, r| {
+            let (pa, pb) = set.segment_polys[i];
+            let b = r.origin + r.dir;
+            !scene_rays.visible(r.origin.as_dvec3(), pa, b.as_dvec3(), pb)
+        }));
+    }
+    let blocked = vis.iter().filter(|&&b| b).count() as f64 / n;
+    println!(
+        "  visible    ours {:>9.2} Mrays/s  (SceneRays::visible, end polygons filtered; occluded {:.1} %)",
+        n / median(&mut t_vis) / 1e6,
+        blocked * 100.0
+    );
+
+    #[cfg(feature = "embree")]
+    if a.packets {
+        let mut t8 = Vec::new();
+        let mut out = vec![None; a.rays];
+        let emb_rays: Vec<_> = set.closest.iter().map(to_embree).collect();
+        for _ in 0..runs {
+            let t = Instant::now();
+            pool.install(|| {
+                out.par_chunks_mut(8).zip(emb_rays.par_chunks(8)).for_each(|(o, r)| emb.intersect8(r, o))
+            });
+            t8.push(t.elapsed().as_secs_f64());
+        }
+        let mut o8 = Vec::new();
+        let mut occ = vec![false; a.rays];
+        let emb_segs: Vec<_> = set.segments.iter().map(to_embree).collect();
+        for _ in 0..runs {
+            let t = Instant::now();
+            pool.install(|| {
+                occ.par_chunks_mut(8).zip(emb_segs.par_chunks(8)).for_each(|(o, r)| emb.occluded8(r, o))
+            });
+            o8.push(t.elapsed().as_secs_f64());
+        }
+        println!(
+            "  packets    embree rtcIntersect8 {:>7.2} Mrays/s | rtcOccluded8 {:>7.2} Mrays/s (incoherent 8-ray packets)",
+            n / median(&mut t8) / 1e6,
+            n / median(&mut o8) / 1e6
+        );
+    }
+    #[cfg(not(feature = "embree"))]
+    if a.packets {
+        println!("  packets    (need --features embree)");
+    }
+    Ok(())
+}
+
+#[cfg(feature = "embree")]
+fn to_embree(r: &Ray) -> radiosity_embree::EmbreeRay {
+    radiosity_embree::EmbreeRay { origin: r.origin, dir: r.dir, tmin: r.tmin, tmax: r.tmax }
+}
+
+/// Both miss, or both hit at the same distance (coincident triangles — two-sided
+/// surfaces — may tie with different ids).
+#[cfg(feature = "embree")]
+fn same_hit(a: Closest, b: Closest) -> bool {
+    a.1 == b.1 || (a.1 != u32::MAX && b.1 != u32::MAX && (a.0 - b.0).abs() <= 1e-4 * a.0.max(1e-3))
+}
+
+/// Resident set size of this process (Linux; 0 elsewhere).
+#[cfg(feature = "embree")]
+fn rss_bytes() -> usize {
+    std::fs::read_to_string("/proc/self/statm")
+        .ok()
+        .and_then(|s| s.split_whitespace().nth(1).and_then(|p| p.parse::<usize>().ok()))
+        .map_or(0, |pages| pages * 4096)
+}
+
+fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+        .unwrap_or_else(|| "unknown CPU".into())
+}
