@@ -1,0 +1,154 @@
+//! Our bounding volume hierarchy over triangles: f32, 8-wide, closest-hit and any-hit
+//! single-ray queries with per-triangle filters.
+//!
+//! The method, file by file:
+//! - `build.rs`: top-down binned SAH (Wald 2007, "On fast construction of SAH-based
+//!   bounding volume hierarchies") building 8-wide nodes directly by repeatedly splitting
+//!   the child of largest area, as Embree does (Wald, Woop, Benthin, Johnson & Ernst 2014);
+//!   parallel with rayon.
+//! - `layout.rs`: 256-byte nodes holding their eight children's boxes as a structure of
+//!   arrays (Wald, Benthin & Boulos 2008; Ernst & Greiner 2008; Dammertz, Hanika & Keller
+//!   2008), and leaves of 4-triangle packets precomputed for Möller–Trumbore.
+//! - `traverse.rs`: ordered depth-first traversal with distance-tagged stack entries
+//!   (closest hit) and unordered traversal with early exit (any hit).
+//! - `kernel.rs`: the per-node box test (slab test made conservative as in Ize 2013) and the
+//!   per-packet triangle test (Möller & Trumbore 1997, deferred division), portable Rust.
+//! - `avx2.rs`: the same two tests with AVX2 intrinsics, chosen at run time when the CPU has
+//!   AVX2; the only `unsafe` code of the library (see its docs for why it is sound).
+//!
+//! Woop, Benthin & Wald's watertight test (2013) was considered for the triangles and not
+//! used: it costs a per-ray shear and three vertex transforms per triangle, and the callers
+//! never depend on watertightness at shared edges (visibility queries ignore the two end
+//! polygons; see `SceneRays`). The edge rule here counts edges as inside, so a ray through a
+//! shared edge hits at least one of the two triangles up to rounding.
+//!
+//! Numbers against Embree on the project's scenes are in BENCHMARKS.md
+//! (`radiosity bench rays`).
+
+mod build;
+mod kernel;
+mod layout;
+mod traverse;
+
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+
+#[cfg(test)]
+mod tests;
+
+use glam::Vec3;
+
+use layout::{Node, TriPacket};
+
+/// A ray with a parametric interval: hits count when `tmin < t < tmax`.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    /// Origin.
+    pub origin: Vec3,
+    /// Direction (need not be normalised; t is in units of this vector).
+    pub dir: Vec3,
+    /// Hits at or before this are ignored.
+    pub tmin: f32,
+    /// Hits at or beyond this are ignored.
+    pub tmax: f32,
+}
+
+impl Ray {
+    /// A ray over `(tmin, tmax)`.
+    pub fn new(origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
+        Ray { origin, dir, tmin, tmax }
+    }
+}
+
+/// A closest hit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter.
+    pub t: f32,
+    /// Barycentric coordinate of v1.
+    pub u: f32,
+    /// Barycentric coordinate of v2.
+    pub v: f32,
+    /// Index of the triangle in the build input.
+    pub prim: u32,
+}
+
+/// The hierarchy.
+#[derive(Clone, Debug, Default)]
+pub struct Bvh {
+    /// Node 0 is the root; empty when there is nothing to hit.
+    nodes: Vec<Node>,
+    packets: Vec<TriPacket>,
+    /// Triangles in the build input (non-finite ones included).
+    len: usize,
+    /// Present when the CPU has AVX2.
+    #[cfg(target_arch = "x86_64")]
+    avx2: Option<avx2::Avx2>,
+}
+
+impl Bvh {
+    /// Builds the hierarchy over `tris` (each three vertices). Degenerate triangles are
+    /// kept (they are never hit); triangles with a non-finite coordinate are left out.
+    pub fn build(tris: &[[Vec3; 3]]) -> Bvh {
+        let (nodes, packets) = build::build(tris);
+        Bvh {
+            nodes,
+            packets,
+            len: tris.len(),
+            #[cfg(target_arch = "x86_64")]
+            avx2: avx2::Avx2::detect(),
+        }
+    }
+
+    /// Number of triangles in the build input.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// True when built over no triangles.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Number of (8-wide) nodes, for statistics.
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Memory used by nodes and triangle packets, in bytes.
+    pub fn memory_bytes(&self) -> usize {
+        self.nodes.len() * std::mem::size_of::<Node>() + self.packets.len() * std::mem::size_of::<TriPacket>()
+    }
+
+    /// Closest hit along the ray.
+    #[inline]
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.intersect_filtered(ray, |_| false)
+    }
+
+    /// Closest hit, ignoring triangles for which `skip(prim)` is true.
+    #[inline]
+    pub fn intersect_filtered(&self, ray: &Ray, skip: impl Fn(u32) -> bool) -> Option<Hit> {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(k) = self.avx2 {
+            return avx2::closest(k, self, ray, skip);
+        }
+        traverse::closest(kernel::Portable, self, ray, skip)
+    }
+
+    /// True if anything is hit within `(tmin, tmax)`.
+    #[inline]
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        self.occluded_filtered(ray, |_| false)
+    }
+
+    /// True if a triangle with `skip(prim) == false` is hit within `(tmin, tmax)`.
+    #[inline]
+    pub fn occluded_filtered(&self, ray: &Ray, skip: impl Fn(u32) -> bool) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(k) = self.avx2 {
+            return avx2::occluded(k, self, ray, skip);
+        }
+        traverse::occluded(kernel::Portable, self, ray, skip)
+    }
+}
