@@ -174,17 +174,36 @@ fn make_rays(tris: &[[Vec3; 3]], tri_poly: &[u32], n: usize, seed: u64, diag: f6
     RaySet { closest, segments, segment_polys }
 }
 
-/// Times `f` over every ray on the pool, writing each result; returns seconds.
-fn trace<T: Send>(pool: &rayon::ThreadPool, rays: &[Ray], out: &mut [T], f: impl Fn(usize, &Ray) -> T + Sync) -> f64 {
-    let t = Instant::now();
-    pool.install(|| {
-        out.par_chunks_mut(CHUNK).zip(rays.par_chunks(CHUNK)).enumerate().for_each(|(c, (o, r))| {
-            for (k, (o, r)) in o.iter_mut().zip(r).enumerate() {
-                *o = f(c * CHUNK + k, r);
-            }
-        })
-    });
-    t.elapsed().as_secs_f64()
+/// Slices each timed run is cut into; backends alternate slice by slice.
+const SLICES: usize = 32;
+
+/// A query run by one backend: ray index and ray to result.
+type Query<'a, T> = &'a (dyn Fn(usize, &Ray) -> T + Sync);
+
+/// Traces every ray once with each backend, alternating between backends slice by slice
+/// (and which goes first), so that load from other processes falls on all of them alike;
+/// returns the seconds each took. `outs[b]` receives backend `b`'s results.
+fn race<T: Send>(pool: &rayon::ThreadPool, rays: &[Ray], outs: &mut [Vec<T>], backends: &[Query<T>]) -> Vec<f64> {
+    let mut secs = vec![0.0; backends.len()];
+    let slice = rays.len().div_ceil(SLICES).max(CHUNK);
+    for (s, start) in (0..rays.len()).step_by(slice).enumerate() {
+        let end = (start + slice).min(rays.len());
+        for k in 0..backends.len() {
+            let b = if s % 2 == 0 { k } else { backends.len() - 1 - k };
+            let f = backends[b];
+            let out = &mut outs[b][start..end];
+            let t = Instant::now();
+            pool.install(|| {
+                out.par_chunks_mut(CHUNK).zip(rays[start..end].par_chunks(CHUNK)).enumerate().for_each(|(c, (o, r))| {
+                    for (i, (o, r)) in o.iter_mut().zip(r).enumerate() {
+                        *o = f(start + c * CHUNK + i, r);
+                    }
+                })
+            });
+            secs[b] += t.elapsed().as_secs_f64();
+        }
+    }
+    secs
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -251,10 +270,22 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
         (emb, median(&mut times), mem)
     };
 
+    let st = bvh.stats();
+    println!(
+        "  tree       ours: {} nodes ({:.2} children), {} leaves ({:.2} triangles, {} packets), depth {}, SAH {:.2} = nodes {:.2} + leaves {:.2}",
+        st.nodes,
+        st.children_per_node,
+        st.leaves,
+        st.triangles_per_leaf,
+        st.packets,
+        st.depth,
+        st.sah_nodes + st.sah_leaves,
+        st.sah_nodes,
+        st.sah_leaves
+    );
     print!(
-        "  build      ours {:>9.2} ms  ({} nodes, {:.1} MiB)",
+        "  build      ours {:>9.2} ms  ({:.1} MiB)",
         ours_build * 1e3,
-        bvh.node_count(),
         bvh.memory_bytes() as f64 / (1 << 20) as f64
     );
     #[cfg(feature = "embree")]
@@ -267,24 +298,27 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
     println!();
 
     // Closest hit.
-    let mut ours_c = vec![MISS; a.rays];
-    let mut t_ours = Vec::new();
+    let ours_q = |_: usize, r: &Ray| bvh.intersect(r).map_or(MISS, |h| (h.t, h.prim));
+    #[allow(unused_mut)]
+    let mut backends: Vec<Query<Closest>> = vec![&ours_q];
     #[cfg(feature = "embree")]
-    let (mut emb_c, mut t_emb) = (vec![MISS; a.rays], Vec::new());
+    let emb_q = |_: usize, r: &Ray| emb.intersect(&to_embree(r)).map_or(MISS, |h| (h.t, h.prim));
+    #[cfg(feature = "embree")]
+    backends.push(&emb_q);
+    let mut outs = vec![vec![MISS; a.rays]; backends.len()];
+    let mut secs = vec![Vec::new(); backends.len()];
     for _ in 0..runs {
-        t_ours.push(trace(pool, &set.closest, &mut ours_c, |_, r| bvh.intersect(r).map_or(MISS, |h| (h.t, h.prim))));
-        #[cfg(feature = "embree")]
-        t_emb.push(trace(pool, &set.closest, &mut emb_c, |_, r| {
-            emb.intersect(&to_embree(r)).map_or(MISS, |h| (h.t, h.prim))
-        }));
+        for (b, t) in race(pool, &set.closest, &mut outs, &backends).into_iter().enumerate() {
+            secs[b].push(t);
+        }
     }
-    let hits = ours_c.iter().filter(|h| h.1 != u32::MAX).count() as f64 / n;
-    let ours_rate = n / median(&mut t_ours) / 1e6;
+    let hits = outs[0].iter().filter(|h| h.1 != u32::MAX).count() as f64 / n;
+    let ours_rate = n / median(&mut secs[0]) / 1e6;
     print!("  closest    ours {ours_rate:>9.2} Mrays/s");
     #[cfg(feature = "embree")]
     {
-        let emb_rate = n / median(&mut t_emb) / 1e6;
-        let agree = ours_c.iter().zip(&emb_c).filter(|(x, y)| same_hit(**x, **y)).count() as f64 / n;
+        let emb_rate = n / median(&mut secs[1]) / 1e6;
+        let agree = outs[0].iter().zip(&outs[1]).filter(|(x, y)| same_hit(**x, **y)).count() as f64 / n;
         print!(
             " | embree {emb_rate:>9.2} Mrays/s | ratio {:.2} | hits {:.1} % | agree {:.3} %",
             ours_rate / emb_rate,
@@ -296,49 +330,47 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
     print!(" | hits {:.1} %", hits * 100.0);
     println!();
 
-    // Any hit on segments.
-    let mut ours_o = vec![false; a.rays];
-    let mut t_ours = Vec::new();
+    // Any hit on segments; the solver's filtered visibility query races along.
+    let ours_q = |_: usize, r: &Ray| bvh.occluded(r);
+    let vis_q = |i: usize, r: &Ray| {
+        let (pa, pb) = set.segment_polys[i];
+        let b = r.origin + r.dir;
+        !scene_rays.visible(r.origin.as_dvec3(), pa, b.as_dvec3(), pb)
+    };
+    #[allow(unused_mut)]
+    let mut backends: Vec<Query<bool>> = vec![&ours_q, &vis_q];
     #[cfg(feature = "embree")]
-    let (mut emb_o, mut t_emb) = (vec![false; a.rays], Vec::new());
+    let emb_q = |_: usize, r: &Ray| emb.occluded(&to_embree(r));
+    #[cfg(feature = "embree")]
+    backends.push(&emb_q);
+    let mut outs = vec![vec![false; a.rays]; backends.len()];
+    let mut secs = vec![Vec::new(); backends.len()];
     for _ in 0..runs {
-        t_ours.push(trace(pool, &set.segments, &mut ours_o, |_, r| bvh.occluded(r)));
-        #[cfg(feature = "embree")]
-        t_emb.push(trace(pool, &set.segments, &mut emb_o, |_, r| emb.occluded(&to_embree(r))));
+        for (b, t) in race(pool, &set.segments, &mut outs, &backends).into_iter().enumerate() {
+            secs[b].push(t);
+        }
     }
-    let blocked = ours_o.iter().filter(|&&b| b).count() as f64 / n;
-    let ours_rate = n / median(&mut t_ours) / 1e6;
+    let blocked = |o: &[bool]| o.iter().filter(|&&b| b).count() as f64 / n;
+    let ours_rate = n / median(&mut secs[0]) / 1e6;
     print!("  any-hit    ours {ours_rate:>9.2} Mrays/s");
     #[cfg(feature = "embree")]
     {
-        let emb_rate = n / median(&mut t_emb) / 1e6;
-        let agree = ours_o.iter().zip(&emb_o).filter(|(x, y)| x == y).count() as f64 / n;
+        let emb_rate = n / median(&mut secs[2]) / 1e6;
+        let agree = outs[0].iter().zip(&outs[2]).filter(|(x, y)| x == y).count() as f64 / n;
         print!(
             " | embree {emb_rate:>9.2} Mrays/s | ratio {:.2} | occluded {:.1} % | agree {:.3} %",
             ours_rate / emb_rate,
-            blocked * 100.0,
+            blocked(&outs[0]) * 100.0,
             agree * 100.0
         );
     }
     #[cfg(not(feature = "embree"))]
-    print!(" | occluded {:.1} %", blocked * 100.0);
+    print!(" | occluded {:.1} %", blocked(&outs[0]) * 100.0);
     println!();
-
-    // The solver's visibility query: end polygons filtered out.
-    let mut vis = vec![false; a.rays];
-    let mut t_vis = Vec::new();
-    for _ in 0..runs {
-        t_vis.push(trace(pool, &set.segments, &mut vis, |i, r| {
-            let (pa, pb) = set.segment_polys[i];
-            let b = r.origin + r.dir;
-            !scene_rays.visible(r.origin.as_dvec3(), pa, b.as_dvec3(), pb)
-        }));
-    }
-    let blocked = vis.iter().filter(|&&b| b).count() as f64 / n;
     println!(
         "  visible    ours {:>9.2} Mrays/s  (SceneRays::visible, end polygons filtered; occluded {:.1} %)",
-        n / median(&mut t_vis) / 1e6,
-        blocked * 100.0
+        n / median(&mut secs[1]) / 1e6,
+        blocked(&outs[1]) * 100.0
     );
 
     #[cfg(feature = "embree")]
