@@ -14,5 +14,5 @@
 pub mod bvh;
 mod scene_rays;
 
-pub use bvh::{Bvh, Hit, Ray};
+pub use bvh::{Bvh, BvhStats, Hit, Ray};
 pub use scene_rays::{SceneRays, SEGMENT_EPS};

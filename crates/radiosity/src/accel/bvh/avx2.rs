@@ -19,7 +19,7 @@
 
 use std::arch::x86_64::*;
 
-use super::kernel::{Kernel, RayPre, FAR_SCALE};
+use super::kernel::{Kernel, RayPre};
 use super::layout::{Node, TriPacket, PACKET, WIDTH};
 use super::{traverse, Bvh, Hit, Ray};
 
@@ -41,18 +41,17 @@ impl Kernel for Avx2 {
         // and the store writes the whole `dist` array.
         unsafe {
             let row = |r: usize| _mm256_loadu_ps(node.bounds[r].as_ptr());
-            let slab = |a: usize, r: usize| {
-                _mm256_mul_ps(_mm256_sub_ps(row(r), _mm256_set1_ps(ray.org[a])), _mm256_set1_ps(ray.inv[a]))
+            let slab = |a: usize, r: usize, inv: f32| {
+                _mm256_mul_ps(_mm256_sub_ps(row(r), _mm256_set1_ps(ray.org[a])), _mm256_set1_ps(inv))
             };
             let tn = _mm256_max_ps(
-                slab(2, ray.near[2]),
-                _mm256_max_ps(slab(1, ray.near[1]), _mm256_max_ps(slab(0, ray.near[0]), _mm256_set1_ps(ray.tmin))),
+                _mm256_max_ps(slab(0, ray.near[0], ray.inv[0]), slab(1, ray.near[1], ray.inv[1])),
+                _mm256_max_ps(slab(2, ray.near[2], ray.inv[2]), _mm256_set1_ps(ray.tmin)),
             );
             let tf = _mm256_min_ps(
-                slab(2, ray.far[2]),
-                _mm256_min_ps(slab(1, ray.far[1]), _mm256_min_ps(slab(0, ray.far[0]), _mm256_set1_ps(f32::INFINITY))),
+                _mm256_min_ps(slab(0, ray.far[0], ray.inv_far[0]), slab(1, ray.far[1], ray.inv_far[1])),
+                _mm256_min_ps(slab(2, ray.far[2], ray.inv_far[2]), _mm256_set1_ps(tmax)),
             );
-            let tf = _mm256_min_ps(_mm256_mul_ps(tf, _mm256_set1_ps(FAR_SCALE)), _mm256_set1_ps(tmax));
             _mm256_storeu_ps(dist.as_mut_ptr(), tn);
             _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32
         }
@@ -98,6 +97,16 @@ impl Kernel for Avx2 {
             );
             _mm_storeu_ps(t.as_mut_ptr(), tt);
             _mm_movemask_ps(ok) as u32
+        }
+    }
+
+    #[inline(always)]
+    fn prefetch<T>(self, x: &T) {
+        let p = x as *const T as *const i8;
+        for line in 0..std::mem::size_of::<T>().div_ceil(64) {
+            // SAFETY: a prefetch never faults; the address is within (or one line past the
+            // start of) `x`.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * line)) };
         }
     }
 }

@@ -73,6 +73,27 @@ pub struct Hit {
     pub prim: u32,
 }
 
+/// Shape and expected cost of a hierarchy, in the terms Embree's statistics use.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BvhStats {
+    /// Interior (8-wide) nodes.
+    pub nodes: usize,
+    /// Leaves.
+    pub leaves: usize,
+    /// Triangle packets (four lanes each).
+    pub packets: usize,
+    /// Mean children per node.
+    pub children_per_node: f64,
+    /// Mean triangles per leaf.
+    pub triangles_per_leaf: f64,
+    /// Deepest leaf, in nodes from the root.
+    pub depth: usize,
+    /// Surface-area cost of the nodes: Σ area(node) / area(root).
+    pub sah_nodes: f64,
+    /// Surface-area cost of the leaves: Σ area(leaf) · packets / area(root).
+    pub sah_leaves: f64,
+}
+
 /// The hierarchy.
 #[derive(Clone, Debug, Default)]
 pub struct Bvh {
@@ -118,6 +139,61 @@ impl Bvh {
     /// Memory used by nodes and triangle packets, in bytes.
     pub fn memory_bytes(&self) -> usize {
         self.nodes.len() * std::mem::size_of::<Node>() + self.packets.len() * std::mem::size_of::<TriPacket>()
+    }
+
+    /// Shape statistics and SAH cost (for benchmarks and tuning).
+    pub fn stats(&self) -> BvhStats {
+        let mut s = BvhStats::default();
+        if self.nodes.is_empty() {
+            return s;
+        }
+        let half_area = |n: &Node, i: usize| {
+            let d = [0, 1, 2].map(|a| (n.bounds[2 * a + 1][i] - n.bounds[2 * a][i]).max(0.0) as f64);
+            d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+        };
+        let root = &self.nodes[0];
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        for a in 0..3 {
+            for i in 0..layout::WIDTH {
+                lo[a] = lo[a].min(root.bounds[2 * a][i]);
+                hi[a] = hi[a].max(root.bounds[2 * a + 1][i]);
+            }
+        }
+        let d = [0, 1, 2].map(|a| (hi[a] - lo[a]).max(0.0) as f64);
+        let root_area = (d[0] * d[1] + d[1] * d[2] + d[2] * d[0]).max(f64::MIN_POSITIVE);
+        let mut children = 0;
+        let mut tris = 0;
+        s.sah_nodes = 1.0;
+        let mut stack = vec![(0u32, 1usize)];
+        while let Some((ni, depth)) = stack.pop() {
+            s.nodes += 1;
+            let n = &self.nodes[ni as usize];
+            for i in 0..layout::WIDTH {
+                if n.bounds[0][i] > n.bounds[1][i] {
+                    continue;
+                }
+                children += 1;
+                let area = half_area(n, i) / root_area;
+                if layout::is_leaf(n.child[i]) {
+                    let (start, count) = layout::leaf_range(n.child[i]);
+                    s.leaves += 1;
+                    s.packets += count;
+                    s.depth = s.depth.max(depth);
+                    s.sah_leaves += area * count as f64;
+                    tris += self.packets[start..start + count]
+                        .iter()
+                        .map(|p| p.prim.iter().filter(|&&id| id != u32::MAX).count())
+                        .sum::<usize>();
+                } else {
+                    s.sah_nodes += area;
+                    stack.push((n.child[i], depth + 1));
+                }
+            }
+        }
+        s.children_per_node = children as f64 / s.nodes as f64;
+        s.triangles_per_leaf = tris as f64 / s.leaves.max(1) as f64;
+        s
     }
 
     /// Closest hit along the ray.

@@ -73,6 +73,7 @@ pub(super) fn closest<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) 
             let node = &bvh.nodes[cur as usize];
             let mut dist = [0f32; WIDTH];
             let mut mask = k.boxes(node, &r, tmax, &mut dist);
+            prefetch_children(k, bvh, &node.child, mask);
             if mask == 0 {
                 match pop_closer(&mut stack, tmax) {
                     Some(c) => {
@@ -147,6 +148,23 @@ pub(super) fn closest<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) 
     Some(Hit { t: tmax, u, v, prim: p.prim[l] })
 }
 
+/// Prefetches the nodes and leaf packets of the children in `mask`, so that their cache
+/// misses overlap (Embree does the same).
+#[inline(always)]
+fn prefetch_children<K: Kernel>(k: K, bvh: &Bvh, child: &[ChildRef; WIDTH], mut mask: u32) {
+    while mask != 0 {
+        let c = child[mask.trailing_zeros() as usize];
+        mask &= mask - 1;
+        if is_leaf(c) {
+            if let Some(p) = bvh.packets.get(leaf_range(c).0) {
+                k.prefetch(p);
+            }
+        } else if let Some(n) = bvh.nodes.get(c as usize) {
+            k.prefetch(n);
+        }
+    }
+}
+
 /// The next stacked subtree that may still hold a hit closer than `tmax`.
 #[inline(always)]
 fn pop_closer(stack: &mut Stack<(ChildRef, f32)>, tmax: f32) -> Option<ChildRef> {
@@ -173,6 +191,7 @@ pub(super) fn occluded<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32)
             let node = &bvh.nodes[cur as usize];
             let mut dist = [0f32; WIDTH];
             let mut mask = k.boxes(node, &r, tmax, &mut dist);
+            prefetch_children(k, bvh, &node.child, mask);
             if mask == 0 {
                 match stack.pop() {
                     Some(c) => {
