@@ -180,11 +180,32 @@ const SLICES: usize = 32;
 /// A query run by one backend: ray index and ray to result.
 type Query<'a, T> = &'a (dyn Fn(usize, &Ray) -> T + Sync);
 
+/// CPU time consumed by the calling thread, in seconds (Linux/Unix; 0 elsewhere).
+fn thread_cpu_seconds() -> f64 {
+    #[cfg(unix)]
+    {
+        let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+        // SAFETY: `ts` is a valid, writable timespec for the duration of the call.
+        if unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) } == 0 {
+            return ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9;
+        }
+    }
+    0.0
+}
+
+/// Seconds one backend took: wall clock, and CPU time summed over the tracing threads
+/// (which leaves out the time slices other processes got on a shared machine).
+#[derive(Clone, Copy, Default)]
+struct Secs {
+    wall: f64,
+    cpu: f64,
+}
+
 /// Traces every ray once with each backend, alternating between backends slice by slice
 /// (and which goes first), so that load from other processes falls on all of them alike;
-/// returns the seconds each took. `outs[b]` receives backend `b`'s results.
-fn race<T: Send>(pool: &rayon::ThreadPool, rays: &[Ray], outs: &mut [Vec<T>], backends: &[Query<T>]) -> Vec<f64> {
-    let mut secs = vec![0.0; backends.len()];
+/// returns the time each took. `outs[b]` receives backend `b`'s results.
+fn race<T: Send>(pool: &rayon::ThreadPool, rays: &[Ray], outs: &mut [Vec<T>], backends: &[Query<T>]) -> Vec<Secs> {
+    let mut secs = vec![Secs::default(); backends.len()];
     let slice = rays.len().div_ceil(SLICES).max(CHUNK);
     for (s, start) in (0..rays.len()).step_by(slice).enumerate() {
         let end = (start + slice).min(rays.len());
@@ -192,18 +213,35 @@ fn race<T: Send>(pool: &rayon::ThreadPool, rays: &[Ray], outs: &mut [Vec<T>], ba
             let b = if s % 2 == 0 { k } else { backends.len() - 1 - k };
             let f = backends[b];
             let out = &mut outs[b][start..end];
+            let cpu_ns = std::sync::atomic::AtomicU64::new(0);
             let t = Instant::now();
             pool.install(|| {
                 out.par_chunks_mut(CHUNK).zip(rays[start..end].par_chunks(CHUNK)).enumerate().for_each(|(c, (o, r))| {
+                    let c0 = thread_cpu_seconds();
                     for (i, (o, r)) in o.iter_mut().zip(r).enumerate() {
                         *o = f(start + c * CHUNK + i, r);
                     }
+                    let ns = ((thread_cpu_seconds() - c0) * 1e9) as u64;
+                    cpu_ns.fetch_add(ns, std::sync::atomic::Ordering::Relaxed);
                 })
             });
-            secs[b] += t.elapsed().as_secs_f64();
+            secs[b].wall += t.elapsed().as_secs_f64();
+            secs[b].cpu += cpu_ns.into_inner() as f64 * 1e-9;
         }
     }
     secs
+}
+
+/// Medians over runs of wall-clock and CPU-time throughput, in Mrays/s.
+struct Rates {
+    wall: f64,
+    cpu: f64,
+}
+
+fn rates(n: f64, runs: &[Secs]) -> Rates {
+    let mut w: Vec<f64> = runs.iter().map(|s| s.wall).collect();
+    let mut c: Vec<f64> = runs.iter().map(|s| s.cpu).collect();
+    Rates { wall: n / median(&mut w) / 1e6, cpu: n / median(&mut c) / 1e6 }
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -313,22 +351,14 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
         }
     }
     let hits = outs[0].iter().filter(|h| h.1 != u32::MAX).count() as f64 / n;
-    let ours_rate = n / median(&mut secs[0]) / 1e6;
-    print!("  closest    ours {ours_rate:>9.2} Mrays/s");
+    let ours = rates(n, &secs[0]);
     #[cfg(feature = "embree")]
-    {
-        let emb_rate = n / median(&mut secs[1]) / 1e6;
-        let agree = outs[0].iter().zip(&outs[1]).filter(|(x, y)| same_hit(**x, **y)).count() as f64 / n;
-        print!(
-            " | embree {emb_rate:>9.2} Mrays/s | ratio {:.2} | hits {:.1} % | agree {:.3} %",
-            ours_rate / emb_rate,
-            hits * 100.0,
-            agree * 100.0
-        );
-    }
+    let agree = outs[0].iter().zip(&outs[1]).filter(|(x, y)| same_hit(**x, **y)).count() as f64 / n;
+    #[cfg(feature = "embree")]
+    let emb_r = Some((rates(n, &secs[1]), agree));
     #[cfg(not(feature = "embree"))]
-    print!(" | hits {:.1} %", hits * 100.0);
-    println!();
+    let emb_r = None;
+    report("closest", &ours, emb_r, &format!("hits {:.1} %", hits * 100.0));
 
     // Any hit on segments; the solver's filtered visibility query races along.
     let ours_q = |_: usize, r: &Ray| bvh.occluded(r);
@@ -351,25 +381,19 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
         }
     }
     let blocked = |o: &[bool]| o.iter().filter(|&&b| b).count() as f64 / n;
-    let ours_rate = n / median(&mut secs[0]) / 1e6;
-    print!("  any-hit    ours {ours_rate:>9.2} Mrays/s");
+    let ours = rates(n, &secs[0]);
     #[cfg(feature = "embree")]
-    {
-        let emb_rate = n / median(&mut secs[2]) / 1e6;
-        let agree = outs[0].iter().zip(&outs[2]).filter(|(x, y)| x == y).count() as f64 / n;
-        print!(
-            " | embree {emb_rate:>9.2} Mrays/s | ratio {:.2} | occluded {:.1} % | agree {:.3} %",
-            ours_rate / emb_rate,
-            blocked(&outs[0]) * 100.0,
-            agree * 100.0
-        );
-    }
+    let agree = outs[0].iter().zip(&outs[2]).filter(|(x, y)| x == y).count() as f64 / n;
+    #[cfg(feature = "embree")]
+    let emb_r = Some((rates(n, &secs[2]), agree));
     #[cfg(not(feature = "embree"))]
-    print!(" | occluded {:.1} %", blocked(&outs[0]) * 100.0);
-    println!();
+    let emb_r = None;
+    report("any-hit", &ours, emb_r, &format!("occluded {:.1} %", blocked(&outs[0]) * 100.0));
+    let vis = rates(n, &secs[1]);
     println!(
-        "  visible    ours {:>9.2} Mrays/s  (SceneRays::visible, end polygons filtered; occluded {:.1} %)",
-        n / median(&mut secs[1]) / 1e6,
+        "  visible    ours {:>6.2} Mrays/s, {:>6.2} per CPU-s  (SceneRays::visible: end polygons filtered; occluded {:.1} %)",
+        vis.wall,
+        vis.cpu,
         blocked(&outs[1]) * 100.0
     );
 
@@ -406,6 +430,22 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
         println!("  packets    (need --features embree)");
     }
     Ok(())
+}
+
+/// One line of results: ours, and Embree's with the ratios when present.
+fn report(what: &str, ours: &Rates, emb: Option<(Rates, f64)>, extra: &str) {
+    print!("  {what:<10} ours {:>6.2} Mrays/s, {:>6.2} per CPU-s", ours.wall, ours.cpu);
+    if let Some((e, agree)) = emb {
+        print!(
+            " | embree {:>6.2}, {:>6.2} per CPU-s | ratio {:.2} (CPU {:.2}) | agree {:.3} %",
+            e.wall,
+            e.cpu,
+            ours.wall / e.wall,
+            ours.cpu / e.cpu,
+            agree * 100.0
+        );
+    }
+    println!(" | {extra}");
 }
 
 #[cfg(feature = "embree")]
