@@ -70,15 +70,22 @@ impl Kernel for Avx2 {
             let rx = _mm_sub_ps(_mm_mul_ps(cy, dz), _mm_mul_ps(cz, dy));
             let ry = _mm_sub_ps(_mm_mul_ps(cz, dx), _mm_mul_ps(cx, dz));
             let rz = _mm_sub_ps(_mm_mul_ps(cx, dy), _mm_mul_ps(cy, dx));
-            let dot = |x: __m128, y: __m128, z: __m128, a: &[[f32; PACKET]; 3]| {
-                _mm_add_ps(_mm_add_ps(_mm_mul_ps(x, ld(&a[0])), _mm_mul_ps(y, ld(&a[1]))), _mm_mul_ps(z, ld(&a[2])))
+            let dot = |x: __m128, y: __m128, z: __m128, a: [__m128; 3]| {
+                _mm_add_ps(_mm_add_ps(_mm_mul_ps(x, a[0]), _mm_mul_ps(y, a[1])), _mm_mul_ps(z, a[2]))
             };
-            let den = dot(dx, dy, dz, &p.ng);
+            let e1 = [ld(&p.e1[0]), ld(&p.e1[1]), ld(&p.e1[2])];
+            let e2 = [ld(&p.e2[0]), ld(&p.e2[1]), ld(&p.e2[2])];
+            let ng = [
+                _mm_sub_ps(_mm_mul_ps(e1[1], e2[2]), _mm_mul_ps(e1[2], e2[1])),
+                _mm_sub_ps(_mm_mul_ps(e1[2], e2[0]), _mm_mul_ps(e1[0], e2[2])),
+                _mm_sub_ps(_mm_mul_ps(e1[0], e2[1]), _mm_mul_ps(e1[1], e2[0])),
+            ];
+            let den = dot(dx, dy, dz, ng);
             let sign_bit = _mm_set1_ps(-0.0);
             let sgn = _mm_and_ps(den, sign_bit);
             let abs_den = _mm_xor_ps(den, sgn);
-            let u = _mm_xor_ps(dot(rx, ry, rz, &p.e2), sgn);
-            let v = _mm_xor_ps(_mm_xor_ps(dot(rx, ry, rz, &p.e1), sign_bit), sgn);
+            let u = _mm_xor_ps(dot(rx, ry, rz, e2), sgn);
+            let v = _mm_xor_ps(_mm_xor_ps(dot(rx, ry, rz, e1), sign_bit), sgn);
             let zero = _mm_setzero_ps();
             let inside = _mm_and_ps(
                 _mm_and_ps(_mm_cmp_ps::<_CMP_NEQ_OQ>(den, zero), _mm_cmp_ps::<_CMP_GE_OQ>(u, zero)),
@@ -87,7 +94,7 @@ impl Kernel for Avx2 {
             if _mm_movemask_ps(inside) == 0 {
                 return 0;
             }
-            let tt = _mm_div_ps(_mm_xor_ps(dot(cx, cy, cz, &p.ng), sgn), abs_den);
+            let tt = _mm_div_ps(_mm_xor_ps(dot(cx, cy, cz, ng), sgn), abs_den);
             let ok = _mm_and_ps(
                 inside,
                 _mm_and_ps(

@@ -14,8 +14,8 @@
 //! and no slab can produce NaN (0·∞) — which would otherwise switch a slab's test off and
 //! make, say, every segment between two points of a flat floor visit most of the tree.
 //!
-//! Triangle test: Möller & Trumbore (1997) in the form Embree uses (Wald et al. 2014), with
-//! the geometric normal precomputed: with C = v0 − o, R = C × d, den = n·d the barycentrics
+//! Triangle test: Möller & Trumbore (1997) in the form Embree uses (Wald et al. 2014): with
+//! n = e1 × e2, C = v0 − o, R = C × d, den = n·d the barycentrics
 //! are u = R·e2 / den, v = −R·e1 / den and t = C·n / den. The edge tests run on the
 //! undivided values with den's sign folded in; the division happens only for packets that
 //! pass them. Edges count as inside (u, v ≥ 0, u + v ≤ 1); rays parallel to the plane
@@ -118,11 +118,15 @@ fn lane_values(p: &TriPacket, ray: &RayPre, l: usize) -> (f32, f32, f32, f32, f3
     let rx = cy * dz - cz * dy;
     let ry = cz * dx - cx * dz;
     let rz = cx * dy - cy * dx;
-    let den = p.ng[0][l] * dx + p.ng[1][l] * dy + p.ng[2][l] * dz;
+    let (e1, e2) = ([p.e1[0][l], p.e1[1][l], p.e1[2][l]], [p.e2[0][l], p.e2[1][l], p.e2[2][l]]);
+    let nx = e1[1] * e2[2] - e1[2] * e2[1];
+    let ny = e1[2] * e2[0] - e1[0] * e2[2];
+    let nz = e1[0] * e2[1] - e1[1] * e2[0];
+    let den = nx * dx + ny * dy + nz * dz;
     let abs_den = xorsign(den, den);
-    let u = xorsign(rx * p.e2[0][l] + ry * p.e2[1][l] + rz * p.e2[2][l], den);
-    let v = xorsign(-(rx * p.e1[0][l] + ry * p.e1[1][l] + rz * p.e1[2][l]), den);
-    let t = xorsign(cx * p.ng[0][l] + cy * p.ng[1][l] + cz * p.ng[2][l], den);
+    let u = xorsign(rx * e2[0] + ry * e2[1] + rz * e2[2], den);
+    let v = xorsign(-(rx * e1[0] + ry * e1[1] + rz * e1[2]), den);
+    let t = xorsign(cx * nx + cy * ny + cz * nz, den);
     (den, abs_den, u, v, t)
 }
 
