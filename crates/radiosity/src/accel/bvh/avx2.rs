@@ -20,7 +20,7 @@
 use std::arch::x86_64::*;
 
 use super::kernel::{Kernel, RayPre};
-use super::layout::{Node, TriPacket, PACKET, WIDTH};
+use super::layout::{prow, NodeUnits, PacketUnits, PACKET, WIDTH};
 use super::{traverse, Bvh, Hit, Ray};
 
 /// Proof that the CPU has AVX2 (see the module docs).
@@ -36,11 +36,11 @@ impl Avx2 {
 
 impl Kernel for Avx2 {
     #[inline(always)]
-    fn boxes(self, node: &Node, ray: &RayPre, tmax: f32, dist: &mut [f32; WIDTH]) -> u32 {
-        // SAFETY: `self` proves AVX2; each load reads one whole `[f32; 8]` row of the node
+    fn boxes(self, node: &NodeUnits, ray: &RayPre, tmax: f32, dist: &mut [f32; WIDTH]) -> u32 {
+        // SAFETY: `self` proves AVX2; each load reads one whole `[f32; 8]` unit of the node
         // and the store writes the whole `dist` array.
         unsafe {
-            let row = |r: usize| _mm256_loadu_ps(node.bounds[r].as_ptr());
+            let row = |r: usize| _mm256_loadu_ps(node[r].0.as_ptr());
             let slab = |a: usize, r: usize, inv: f32| {
                 _mm256_mul_ps(_mm256_sub_ps(row(r), _mm256_set1_ps(ray.org[a])), _mm256_set1_ps(inv))
             };
@@ -58,23 +58,23 @@ impl Kernel for Avx2 {
     }
 
     #[inline(always)]
-    fn triangles(self, p: &TriPacket, ray: &RayPre, tmax: f32, t: &mut [f32; PACKET]) -> u32 {
+    fn triangles(self, p: &PacketUnits, ray: &RayPre, tmax: f32, t: &mut [f32; PACKET]) -> u32 {
         // SAFETY: `self` proves AVX2; each load reads one whole `[f32; 4]` row of the
         // packet and the store writes the whole `t` array.
         unsafe {
             let ld = |a: &[f32; PACKET]| _mm_loadu_ps(a.as_ptr());
             let [dx, dy, dz] = ray.dir.map(|d| _mm_set1_ps(d));
-            let cx = _mm_sub_ps(ld(&p.v0[0]), _mm_set1_ps(ray.org[0]));
-            let cy = _mm_sub_ps(ld(&p.v0[1]), _mm_set1_ps(ray.org[1]));
-            let cz = _mm_sub_ps(ld(&p.v0[2]), _mm_set1_ps(ray.org[2]));
+            let cx = _mm_sub_ps(ld(prow(p, 0)), _mm_set1_ps(ray.org[0]));
+            let cy = _mm_sub_ps(ld(prow(p, 1)), _mm_set1_ps(ray.org[1]));
+            let cz = _mm_sub_ps(ld(prow(p, 2)), _mm_set1_ps(ray.org[2]));
             let rx = _mm_sub_ps(_mm_mul_ps(cy, dz), _mm_mul_ps(cz, dy));
             let ry = _mm_sub_ps(_mm_mul_ps(cz, dx), _mm_mul_ps(cx, dz));
             let rz = _mm_sub_ps(_mm_mul_ps(cx, dy), _mm_mul_ps(cy, dx));
             let dot = |x: __m128, y: __m128, z: __m128, a: [__m128; 3]| {
                 _mm_add_ps(_mm_add_ps(_mm_mul_ps(x, a[0]), _mm_mul_ps(y, a[1])), _mm_mul_ps(z, a[2]))
             };
-            let e1 = [ld(&p.e1[0]), ld(&p.e1[1]), ld(&p.e1[2])];
-            let e2 = [ld(&p.e2[0]), ld(&p.e2[1]), ld(&p.e2[2])];
+            let e1 = [ld(prow(p, 3)), ld(prow(p, 4)), ld(prow(p, 5))];
+            let e2 = [ld(prow(p, 6)), ld(prow(p, 7)), ld(prow(p, 8))];
             let ng = [
                 _mm_sub_ps(_mm_mul_ps(e1[1], e2[2]), _mm_mul_ps(e1[2], e2[1])),
                 _mm_sub_ps(_mm_mul_ps(e1[2], e2[0]), _mm_mul_ps(e1[0], e2[2])),

@@ -17,7 +17,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::layout::{leaf_ref, ChildRef, Node, TriPacket, MAX_PACKETS, PACKET, WIDTH};
+use super::layout::{leaf_ref, ChildRef, Node, TriPacket, Unit, MAX_UNITS, NODE_UNITS, PACKET, WIDTH};
 
 /// Bins per axis.
 const BINS: usize = 32;
@@ -347,40 +347,42 @@ fn build_node(refs: &mut [PrimRef], set: Set, plan: Plan, depth: usize) -> Tmp {
     }
 }
 
-/// Writes `tmp` (a node) and its subtree into `nodes` / `packets`; returns its index.
-fn flatten(
-    tmp: &[(Aabb, Tmp)],
-    refs: &[PrimRef],
-    tris: &[[Vec3; 3]],
-    nodes: &mut Vec<Node>,
-    packets: &mut Vec<TriPacket>,
-) -> ChildRef {
-    let index = nodes.len();
-    nodes.push(Node::EMPTY);
+/// Appends `tmp` (a node) to `units`, then the packets of its leaf children, then its
+/// interior children's subtrees; returns the node's unit index.
+fn flatten(tmp: &[(Aabb, Tmp)], refs: &[PrimRef], tris: &[[Vec3; 3]], units: &mut Vec<Unit>) -> ChildRef {
+    let at = units.len();
+    units.extend([Unit::default(); NODE_UNITS]);
+    let mut node = Node::EMPTY;
     for (slot, (b, kid)) in tmp.iter().enumerate() {
-        let r = match kid {
-            Tmp::Leaf { start, count } => {
-                let first = packets.len();
-                for chunk in refs[*start..start + count].chunks(PACKET) {
-                    let mut p = TriPacket::EMPTY;
-                    for (lane, r) in chunk.iter().enumerate() {
-                        p.set(lane, &tris[r.id as usize], r.id);
-                    }
-                    packets.push(p);
+        if let Tmp::Leaf { start, count } = kid {
+            let first = units.len();
+            let chunks = refs[*start..start + count].chunks(PACKET);
+            let n = chunks.len();
+            for chunk in chunks {
+                let mut p = TriPacket::EMPTY;
+                for (lane, r) in chunk.iter().enumerate() {
+                    p.set(lane, &tris[r.id as usize], r.id);
                 }
-                leaf_ref(first, packets.len() - first)
+                units.extend(p.to_units());
             }
-            Tmp::Node(kids) => flatten(kids, refs, tris, nodes, packets),
-        };
-        nodes[index].set(slot, b.lo, b.hi, r);
+            node.set(slot, b.lo, b.hi, leaf_ref(first, n));
+        }
     }
-    index as ChildRef
+    for (slot, (b, kid)) in tmp.iter().enumerate() {
+        if let Tmp::Node(kids) = kid {
+            let r = flatten(kids, refs, tris, units);
+            node.set(slot, b.lo, b.hi, r);
+        }
+    }
+    units[at..at + NODE_UNITS].copy_from_slice(&node.to_units());
+    at as ChildRef
 }
 
-/// Builds the node and packet arrays over `tris`; node 0 is the root. Empty when no
-/// triangle is finite.
-pub(super) fn build(tris: &[[Vec3; 3]]) -> (Vec<Node>, Vec<TriPacket>) {
-    assert!(tris.len() <= MAX_PACKETS, "too many triangles for one BVH ({})", tris.len());
+/// Builds the stored tree over `tris` (the root node at unit 0); empty when no triangle is
+/// finite.
+pub(super) fn build(tris: &[[Vec3; 3]]) -> Vec<Unit> {
+    // Two units per triangle at most: 5 per packet of 4, 7 per node of 8 leaves.
+    assert!(tris.len() <= MAX_UNITS / 2, "too many triangles for one BVH ({})", tris.len());
     let mut refs: Vec<PrimRef> = tris
         .par_iter()
         .enumerate()
@@ -388,7 +390,7 @@ pub(super) fn build(tris: &[[Vec3; 3]]) -> (Vec<Node>, Vec<TriPacket>) {
         .map(|(i, t)| PrimRef { lo: t[0].min(t[1]).min(t[2]), hi: t[0].max(t[1]).max(t[2]), id: i as u32 })
         .collect();
     if refs.is_empty() {
-        return (Vec::new(), Vec::new());
+        return Vec::new();
     }
     let bounds = refs
         .par_chunks(PARALLEL_BIN_MIN / 4)
@@ -402,8 +404,7 @@ pub(super) fn build(tris: &[[Vec3; 3]]) -> (Vec<Node>, Vec<TriPacket>) {
             Tmp::Leaf { .. } => unreachable!("build_node returns a node"),
         },
     };
-    let mut nodes = Vec::with_capacity(refs.len() / 8 + 1);
-    let mut packets = Vec::with_capacity(refs.len() / 2 + 1);
-    flatten(&tmp, &refs, tris, &mut nodes, &mut packets);
-    (nodes, packets)
+    let mut units = Vec::with_capacity(refs.len() * 3 / 2 + NODE_UNITS);
+    flatten(&tmp, &refs, tris, &mut units);
+    units
 }

@@ -21,7 +21,7 @@
 //! pass them. Edges count as inside (u, v ≥ 0, u + v ≤ 1); rays parallel to the plane
 //! (den = 0) and NaN inputs never hit.
 
-use super::layout::{Node, TriPacket, PACKET, WIDTH};
+use super::layout::{prow, NodeUnits, PacketUnits, PACKET, WIDTH};
 use super::Ray;
 
 /// 1 + 4γ₃ with γₙ = nε/(1 − nε), ε = 2⁻²⁴ (Pharr, Jakob & Humphreys, PBR 3rd ed. §3.9):
@@ -70,11 +70,11 @@ impl RayPre {
 pub(super) trait Kernel: Copy {
     /// Bit `i` set when the ray meets child `i`'s box within `[tmin, tmax]`; `dist[i]` is
     /// then the entry distance.
-    fn boxes(self, node: &Node, ray: &RayPre, tmax: f32, dist: &mut [f32; WIDTH]) -> u32;
+    fn boxes(self, node: &NodeUnits, ray: &RayPre, tmax: f32, dist: &mut [f32; WIDTH]) -> u32;
 
     /// Bit `l` set when triangle `l` is hit at `tmin < t < tmax`; `t[l]` is then the hit
     /// distance.
-    fn triangles(self, p: &TriPacket, ray: &RayPre, tmax: f32, t: &mut [f32; PACKET]) -> u32;
+    fn triangles(self, p: &PacketUnits, ray: &RayPre, tmax: f32, t: &mut [f32; PACKET]) -> u32;
 
     /// Starts loading `x` into the cache (a hint; may do nothing).
     #[inline(always)]
@@ -110,15 +110,16 @@ fn xorsign(x: f32, s: f32) -> f32 {
 /// Undivided Möller–Trumbore values of lane `l`: (den, |den|, U, V, T) with den's sign
 /// folded into U, V, T.
 #[inline(always)]
-fn lane_values(p: &TriPacket, ray: &RayPre, l: usize) -> (f32, f32, f32, f32, f32) {
+fn lane_values(p: &PacketUnits, ray: &RayPre, l: usize) -> (f32, f32, f32, f32, f32) {
     let [dx, dy, dz] = ray.dir;
-    let cx = p.v0[0][l] - ray.org[0];
-    let cy = p.v0[1][l] - ray.org[1];
-    let cz = p.v0[2][l] - ray.org[2];
+    let cx = prow(p, 0)[l] - ray.org[0];
+    let cy = prow(p, 1)[l] - ray.org[1];
+    let cz = prow(p, 2)[l] - ray.org[2];
     let rx = cy * dz - cz * dy;
     let ry = cz * dx - cx * dz;
     let rz = cx * dy - cy * dx;
-    let (e1, e2) = ([p.e1[0][l], p.e1[1][l], p.e1[2][l]], [p.e2[0][l], p.e2[1][l], p.e2[2][l]]);
+    let e1 = [3, 4, 5].map(|k| prow(p, k)[l]);
+    let e2 = [6, 7, 8].map(|k| prow(p, k)[l]);
     let nx = e1[1] * e2[2] - e1[2] * e2[1];
     let ny = e1[2] * e2[0] - e1[0] * e2[2];
     let nz = e1[0] * e2[1] - e1[1] * e2[0];
@@ -132,7 +133,7 @@ fn lane_values(p: &TriPacket, ray: &RayPre, l: usize) -> (f32, f32, f32, f32, f3
 
 /// Barycentrics (of v1, v2) of lane `l`, for a lane a kernel reported hit.
 #[inline]
-pub(super) fn lane_uv(p: &TriPacket, ray: &RayPre, l: usize) -> (f32, f32) {
+pub(super) fn lane_uv(p: &PacketUnits, ray: &RayPre, l: usize) -> (f32, f32) {
     let (_, abs_den, u, v, _) = lane_values(p, ray, l);
     (u / abs_den, v / abs_den)
 }
@@ -143,10 +144,10 @@ pub(super) struct Portable;
 
 impl Kernel for Portable {
     #[inline(always)]
-    fn boxes(self, node: &Node, ray: &RayPre, tmax: f32, dist: &mut [f32; WIDTH]) -> u32 {
+    fn boxes(self, node: &NodeUnits, ray: &RayPre, tmax: f32, dist: &mut [f32; WIDTH]) -> u32 {
         let mut mask = 0;
         for i in 0..WIDTH {
-            let slab = |a: usize, row: usize, inv: f32| (node.bounds[row][i] - ray.org[a]) * inv;
+            let slab = |a: usize, row: usize, inv: f32| (node[row].0[i] - ray.org[a]) * inv;
             let tn = max_ps(
                 max_ps(slab(0, ray.near[0], ray.inv[0]), slab(1, ray.near[1], ray.inv[1])),
                 max_ps(slab(2, ray.near[2], ray.inv[2]), ray.tmin),
@@ -162,7 +163,7 @@ impl Kernel for Portable {
     }
 
     #[inline(always)]
-    fn triangles(self, p: &TriPacket, ray: &RayPre, tmax: f32, t: &mut [f32; PACKET]) -> u32 {
+    fn triangles(self, p: &PacketUnits, ray: &RayPre, tmax: f32, t: &mut [f32; PACKET]) -> u32 {
         let mut mask = 0;
         for l in 0..PACKET {
             let (den, abs_den, u, v, tt) = lane_values(p, ray, l);

@@ -6,9 +6,10 @@
 //!   bounding volume hierarchies") building 8-wide nodes directly by repeatedly splitting
 //!   the child of largest area, as Embree does (Wald, Woop, Benthin, Johnson & Ernst 2014);
 //!   parallel with rayon.
-//! - `layout.rs`: 256-byte nodes holding their eight children's boxes as a structure of
+//! - `layout.rs`: 224-byte nodes holding their eight children's boxes as a structure of
 //!   arrays (Wald, Benthin & Boulos 2008; Ernst & Greiner 2008; Dammertz, Hanika & Keller
-//!   2008), and leaves of 4-triangle packets precomputed for Möller–Trumbore.
+//!   2008), and leaves of 4-triangle packets for Möller–Trumbore, stored in one array with
+//!   each node followed by its leaves.
 //! - `traverse.rs`: ordered depth-first traversal with distance-tagged stack entries
 //!   (closest hit) and unordered traversal with early exit (any hit).
 //! - `kernel.rs`: the per-node box test (slab test made conservative as in Ize 2013) and the
@@ -38,7 +39,7 @@ mod tests;
 
 use glam::Vec3;
 
-use layout::{Node, TriPacket};
+use layout::Unit;
 
 /// A ray with a parametric interval: hits count when `tmin < t < tmax`.
 #[derive(Clone, Copy, Debug)]
@@ -97,9 +98,10 @@ pub struct BvhStats {
 /// The hierarchy.
 #[derive(Clone, Debug, Default)]
 pub struct Bvh {
-    /// Node 0 is the root; empty when there is nothing to hit.
-    nodes: Vec<Node>,
-    packets: Vec<TriPacket>,
+    /// Nodes and leaf packets, the root node first; empty when there is nothing to hit.
+    units: Vec<Unit>,
+    /// Interior nodes stored.
+    nodes: usize,
     /// Triangles in the build input (non-finite ones included).
     len: usize,
     /// Present when the CPU has AVX2.
@@ -111,14 +113,16 @@ impl Bvh {
     /// Builds the hierarchy over `tris` (each three vertices). Degenerate triangles are
     /// kept (they are never hit); triangles with a non-finite coordinate are left out.
     pub fn build(tris: &[[Vec3; 3]]) -> Bvh {
-        let (nodes, packets) = build::build(tris);
-        Bvh {
-            nodes,
-            packets,
+        let units = build::build(tris);
+        let mut bvh = Bvh {
+            units,
+            nodes: 0,
             len: tris.len(),
             #[cfg(target_arch = "x86_64")]
             avx2: avx2::Avx2::detect(),
-        }
+        };
+        bvh.nodes = bvh.stats().nodes;
+        bvh
     }
 
     /// Number of triangles in the build input.
@@ -133,31 +137,31 @@ impl Bvh {
 
     /// Number of (8-wide) nodes, for statistics.
     pub fn node_count(&self) -> usize {
-        self.nodes.len()
+        self.nodes
     }
 
     /// Memory used by nodes and triangle packets, in bytes.
     pub fn memory_bytes(&self) -> usize {
-        self.nodes.len() * std::mem::size_of::<Node>() + self.packets.len() * std::mem::size_of::<TriPacket>()
+        self.units.len() * std::mem::size_of::<Unit>()
     }
 
     /// Shape statistics and SAH cost (for benchmarks and tuning).
     pub fn stats(&self) -> BvhStats {
         let mut s = BvhStats::default();
-        if self.nodes.is_empty() {
+        if self.units.is_empty() {
             return s;
         }
-        let half_area = |n: &Node, i: usize| {
-            let d = [0, 1, 2].map(|a| (n.bounds[2 * a + 1][i] - n.bounds[2 * a][i]).max(0.0) as f64);
+        let half_area = |n: &layout::NodeUnits, i: usize| {
+            let d = [0, 1, 2].map(|a| (n[2 * a + 1].0[i] - n[2 * a].0[i]).max(0.0) as f64);
             d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
         };
-        let root = &self.nodes[0];
+        let root = layout::node_at(&self.units, 0);
         let mut lo = [f32::INFINITY; 3];
         let mut hi = [f32::NEG_INFINITY; 3];
         for a in 0..3 {
             for i in 0..layout::WIDTH {
-                lo[a] = lo[a].min(root.bounds[2 * a][i]);
-                hi[a] = hi[a].max(root.bounds[2 * a + 1][i]);
+                lo[a] = lo[a].min(root[2 * a].0[i]);
+                hi[a] = hi[a].max(root[2 * a + 1].0[i]);
             }
         }
         let d = [0, 1, 2].map(|a| (hi[a] - lo[a]).max(0.0) as f64);
@@ -168,26 +172,29 @@ impl Bvh {
         let mut stack = vec![(0u32, 1usize)];
         while let Some((ni, depth)) = stack.pop() {
             s.nodes += 1;
-            let n = &self.nodes[ni as usize];
+            let n = layout::node_at(&self.units, ni as usize);
             for i in 0..layout::WIDTH {
-                if n.bounds[0][i] > n.bounds[1][i] {
+                if n[0].0[i] > n[1].0[i] {
                     continue;
                 }
                 children += 1;
                 let area = half_area(n, i) / root_area;
-                if layout::is_leaf(n.child[i]) {
-                    let (start, count) = layout::leaf_range(n.child[i]);
+                let c = layout::child(n, i);
+                if layout::is_leaf(c) {
+                    let (start, count) = layout::leaf_range(c);
                     s.leaves += 1;
                     s.packets += count;
                     s.depth = s.depth.max(depth);
                     s.sah_leaves += area * count as f64;
-                    tris += self.packets[start..start + count]
-                        .iter()
-                        .map(|p| p.prim.iter().filter(|&&id| id != u32::MAX).count())
+                    tris += (0..count)
+                        .map(|k| {
+                            let p = layout::packet_at(&self.units, start + k * layout::PACKET_UNITS);
+                            (0..layout::PACKET).filter(|&l| layout::prim(p, l) != u32::MAX).count()
+                        })
                         .sum::<usize>();
                 } else {
                     s.sah_nodes += area;
-                    stack.push((n.child[i], depth + 1));
+                    stack.push((c, depth + 1));
                 }
             }
         }

@@ -6,7 +6,7 @@ use glam::Vec3;
 use rand::{RngExt, SeedableRng};
 
 use super::kernel::{lane_uv, Kernel, Portable, RayPre};
-use super::layout::TriPacket;
+use super::layout::{prim, PacketUnits, TriPacket};
 use super::*;
 
 type Rng = rand_pcg::Pcg64Mcg;
@@ -78,7 +78,7 @@ fn kernels(tris: &[[Vec3; 3]]) -> Vec<(&'static str, Bvh)> {
 
 /// Every triangle tested with the portable kernel: the closest accepted hit.
 struct Brute {
-    packets: Vec<TriPacket>,
+    packets: Vec<PacketUnits>,
 }
 
 impl Brute {
@@ -91,7 +91,7 @@ impl Brute {
                 if t.iter().all(|p| p.is_finite()) {
                     p.set(0, t, i as u32);
                 }
-                p
+                p.to_units()
             })
             .collect();
         Brute { packets }
@@ -103,9 +103,9 @@ impl Brute {
         for p in &self.packets {
             let tmax = best.map_or(ray.tmax, |h| h.t);
             let mut t = [0.0; 4];
-            if Portable.triangles(p, &r, tmax, &mut t) & 1 != 0 && !skip(p.prim[0]) {
+            if Portable.triangles(p, &r, tmax, &mut t) & 1 != 0 && !skip(prim(p, 0)) {
                 let (u, v) = lane_uv(p, &r, 0);
-                best = Some(Hit { t: t[0], u, v, prim: p.prim[0] });
+                best = Some(Hit { t: t[0], u, v, prim: prim(p, 0) });
             }
         }
         best

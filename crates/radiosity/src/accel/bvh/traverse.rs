@@ -13,7 +13,9 @@
 //! can overflow it (a balanced tree over 10⁹ triangles needs under 80).
 
 use super::kernel::{lane_uv, Kernel, RayPre};
-use super::layout::{is_leaf, leaf_range, ChildRef, PACKET, WIDTH};
+use super::layout::{
+    child, is_leaf, leaf_range, node_at, packet_at, prim, ChildRef, NodeUnits, NODE_UNITS, PACKET, PACKET_UNITS, WIDTH,
+};
 use super::{Bvh, Hit, Ray};
 
 const INLINE: usize = 64;
@@ -58,7 +60,7 @@ impl<T: Copy + Default> Stack<T> {
 /// Closest hit with `tmin < t < tmax` among triangles with `skip(prim) == false`.
 #[inline(always)]
 pub(super) fn closest<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) -> bool) -> Option<Hit> {
-    if bvh.nodes.is_empty() {
+    if bvh.units.is_empty() {
         return None;
     }
     let r = RayPre::new(ray);
@@ -70,10 +72,10 @@ pub(super) fn closest<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) 
     'traverse: loop {
         // Descend through interior nodes to a leaf.
         while !is_leaf(cur) {
-            let node = &bvh.nodes[cur as usize];
+            let node = node_at(&bvh.units, cur as usize);
             let mut dist = [0f32; WIDTH];
             let mut mask = k.boxes(node, &r, tmax, &mut dist);
-            prefetch_children(k, bvh, &node.child, mask);
+            prefetch_children(k, bvh, node, mask);
             if mask == 0 {
                 match pop_closer(&mut stack, tmax) {
                     Some(c) => {
@@ -86,27 +88,27 @@ pub(super) fn closest<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) 
             let i = mask.trailing_zeros() as usize;
             mask &= mask - 1;
             if mask == 0 {
-                cur = node.child[i];
+                cur = child(node, i);
                 continue;
             }
             let j = mask.trailing_zeros() as usize;
             mask &= mask - 1;
             if mask == 0 {
                 let (near, far) = if dist[i] <= dist[j] { (i, j) } else { (j, i) };
-                stack.push((node.child[far], dist[far]));
-                cur = node.child[near];
+                stack.push((child(node, far), dist[far]));
+                cur = child(node, near);
                 continue;
             }
             // Three or more: sort by entry distance, farthest first, and push all but the
             // nearest (insertion sort; at most eight).
             let mut hits = [(0 as ChildRef, 0f32); WIDTH];
-            hits[0] = (node.child[i], dist[i]);
-            hits[1] = (node.child[j], dist[j]);
+            hits[0] = (child(node, i), dist[i]);
+            hits[1] = (child(node, j), dist[j]);
             let mut n = 2;
             while mask != 0 {
                 let c = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                hits[n] = (node.child[c], dist[c]);
+                hits[n] = (child(node, c), dist[c]);
                 n += 1;
             }
             for a in 1..n {
@@ -125,15 +127,17 @@ pub(super) fn closest<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) 
         }
         // A leaf: its packets.
         let (start, count) = leaf_range(cur);
-        for (pi, p) in bvh.packets[start..start + count].iter().enumerate() {
+        for pi in 0..count {
+            let at = start + pi * PACKET_UNITS;
+            let p = packet_at(&bvh.units, at);
             let mut t = [0f32; PACKET];
             let mut mask = k.triangles(p, &r, tmax, &mut t);
             while mask != 0 {
                 let l = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                if t[l] < tmax && !skip(p.prim[l]) {
+                if t[l] < tmax && !skip(prim(p, l)) {
                     tmax = t[l];
-                    best = Some((start + pi, l));
+                    best = Some((at, l));
                 }
             }
         }
@@ -142,24 +146,24 @@ pub(super) fn closest<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) 
             None => break,
         }
     }
-    let (pi, l) = best?;
-    let p = &bvh.packets[pi];
+    let (at, l) = best?;
+    let p = packet_at(&bvh.units, at);
     let (u, v) = lane_uv(p, &r, l);
-    Some(Hit { t: tmax, u, v, prim: p.prim[l] })
+    Some(Hit { t: tmax, u, v, prim: prim(p, l) })
 }
 
 /// Prefetches the nodes and leaf packets of the children in `mask`, so that their cache
 /// misses overlap (Embree does the same).
 #[inline(always)]
-fn prefetch_children<K: Kernel>(k: K, bvh: &Bvh, child: &[ChildRef; WIDTH], mut mask: u32) {
+fn prefetch_children<K: Kernel>(k: K, bvh: &Bvh, node: &NodeUnits, mut mask: u32) {
     while mask != 0 {
-        let c = child[mask.trailing_zeros() as usize];
+        let c = child(node, mask.trailing_zeros() as usize);
         mask &= mask - 1;
         if is_leaf(c) {
-            if let Some(p) = bvh.packets.get(leaf_range(c).0) {
+            if let Some(p) = bvh.units.get(leaf_range(c).0..).and_then(|u| u.first_chunk::<PACKET_UNITS>()) {
                 k.prefetch(p);
             }
-        } else if let Some(n) = bvh.nodes.get(c as usize) {
+        } else if let Some(n) = bvh.units.get(c as usize..).and_then(|u| u.first_chunk::<NODE_UNITS>()) {
             k.prefetch(n);
         }
     }
@@ -179,7 +183,7 @@ fn pop_closer(stack: &mut Stack<(ChildRef, f32)>, tmax: f32) -> Option<ChildRef>
 /// True if a triangle with `skip(prim) == false` is hit at `tmin < t < tmax`.
 #[inline(always)]
 pub(super) fn occluded<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) -> bool) -> bool {
-    if bvh.nodes.is_empty() {
+    if bvh.units.is_empty() {
         return false;
     }
     let r = RayPre::new(ray);
@@ -188,10 +192,10 @@ pub(super) fn occluded<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32)
     let mut cur: ChildRef = 0;
     loop {
         while !is_leaf(cur) {
-            let node = &bvh.nodes[cur as usize];
+            let node = node_at(&bvh.units, cur as usize);
             let mut dist = [0f32; WIDTH];
             let mut mask = k.boxes(node, &r, tmax, &mut dist);
-            prefetch_children(k, bvh, &node.child, mask);
+            prefetch_children(k, bvh, node, mask);
             if mask == 0 {
                 match stack.pop() {
                     Some(c) => {
@@ -201,21 +205,22 @@ pub(super) fn occluded<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32)
                     None => return false,
                 }
             }
-            cur = node.child[mask.trailing_zeros() as usize];
+            cur = child(node, mask.trailing_zeros() as usize);
             mask &= mask - 1;
             while mask != 0 {
-                stack.push(node.child[mask.trailing_zeros() as usize]);
+                stack.push(child(node, mask.trailing_zeros() as usize));
                 mask &= mask - 1;
             }
         }
         let (start, count) = leaf_range(cur);
-        for p in &bvh.packets[start..start + count] {
+        for pi in 0..count {
+            let p = packet_at(&bvh.units, start + pi * PACKET_UNITS);
             let mut t = [0f32; PACKET];
             let mut mask = k.triangles(p, &r, tmax, &mut t);
             while mask != 0 {
                 let l = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                if !skip(p.prim[l]) {
+                if !skip(prim(p, l)) {
                     return true;
                 }
             }
