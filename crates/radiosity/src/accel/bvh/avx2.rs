@@ -44,13 +44,20 @@ impl Kernel for Avx2 {
             let slab = |a: usize, r: usize, inv: f32| {
                 _mm256_mul_ps(_mm256_sub_ps(row(r), _mm256_set1_ps(ray.org[a])), _mm256_set1_ps(inv))
             };
+            // Each slab distance is the first operand: a NaN one (0·∞) is dropped.
             let tn = _mm256_max_ps(
-                _mm256_max_ps(slab(0, ray.near[0], ray.inv[0]), slab(1, ray.near[1], ray.inv[1])),
-                _mm256_max_ps(slab(2, ray.near[2], ray.inv[2]), _mm256_set1_ps(ray.tmin)),
+                slab(2, ray.near[2], ray.inv[2]),
+                _mm256_max_ps(
+                    slab(1, ray.near[1], ray.inv[1]),
+                    _mm256_max_ps(slab(0, ray.near[0], ray.inv[0]), _mm256_set1_ps(ray.tmin)),
+                ),
             );
             let tf = _mm256_min_ps(
-                _mm256_min_ps(slab(0, ray.far[0], ray.inv_far[0]), slab(1, ray.far[1], ray.inv_far[1])),
-                _mm256_min_ps(slab(2, ray.far[2], ray.inv_far[2]), _mm256_set1_ps(tmax)),
+                slab(2, ray.far[2], ray.inv_far[2]),
+                _mm256_min_ps(
+                    slab(1, ray.far[1], ray.inv_far[1]),
+                    _mm256_min_ps(slab(0, ray.far[0], ray.inv_far[0]), _mm256_set1_ps(tmax)),
+                ),
             );
             _mm256_storeu_ps(dist.as_mut_ptr(), tn);
             _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32

@@ -6,6 +6,10 @@
 //! becomes a leaf or, recursively, a node. Children of large sets are built in parallel
 //! (rayon), and the binning of large sets is itself split over threads.
 //!
+//! Sets of at most [`SWEEP_MAX`] triangles are split by an exact sweep over all object
+//! splits along each axis (the "full sweep" SAH of MacDonald & Booth, affordable near the
+//! leaves) instead of bins.
+//!
 //! Costs count triangle tests in packets of four (`⌈n/4⌉`, Embree's "block size"), so the
 //! SAH prefers leaves that fill whole packets. Sets of up to [`MIN_LEAF`] triangles always
 //! become leaves; up to [`MAX_LEAF`] when the SAH says a leaf is cheaper. When all
@@ -21,6 +25,8 @@ use super::layout::{leaf_ref, ChildRef, Node, TriPacket, Unit, MAX_UNITS, NODE_U
 
 /// Bins per axis.
 const BINS: usize = 32;
+/// Sets this small get an exact SAH sweep over every object split instead of bins.
+const SWEEP_MAX: usize = 32;
 /// Sets this small always become one leaf.
 const MIN_LEAF: usize = 4;
 /// The largest leaf (the SAH decides between `MIN_LEAF` and this).
@@ -122,6 +128,8 @@ fn blocks(n: usize) -> f32 {
 enum Plan {
     /// Centroids in bins `0..=bin` of `axis` go left.
     Sah { axis: usize, bin: usize, origin: f32, scale: f32 },
+    /// The first `left` references in centroid order along `axis` go left.
+    Sweep { axis: usize, left: usize },
     /// Object median along the longest centroid axis.
     Median,
 }
@@ -149,8 +157,8 @@ struct Bins {
 }
 
 impl Bins {
-    fn new() -> Box<Bins> {
-        Box::new(Bins { bounds: [[Aabb::EMPTY; BINS]; 3], count: [[0; BINS]; 3] })
+    fn new() -> Bins {
+        Bins { bounds: [[Aabb::EMPTY; BINS]; 3], count: [[0; BINS]; 3] }
     }
 
     fn add_all(&mut self, refs: &[PrimRef], origin: Vec3, scale: Vec3) {
@@ -166,7 +174,7 @@ impl Bins {
         }
     }
 
-    fn merge(mut self: Box<Self>, o: Box<Bins>) -> Box<Bins> {
+    fn merge(mut self, o: Bins) -> Bins {
         for axis in 0..3 {
             for i in 0..BINS {
                 self.count[axis][i] += o.count[axis][i];
@@ -182,9 +190,48 @@ fn bin_of(c: f32, origin: f32, scale: f32) -> usize {
     (((c - origin) * scale) as usize).min(BINS - 1)
 }
 
-/// The best binned-SAH plane of a set: (cost = Σ half-area × blocks, plan), or `None` when
-/// all centroids coincide.
+/// Orders references by centroid along `axis` (ties by input index, so the order is the
+/// same every time).
+fn sort_along(refs: &mut [PrimRef], axis: usize) {
+    refs.sort_unstable_by(|x, y| x.c2()[axis].total_cmp(&y.c2()[axis]).then(x.id.cmp(&y.id)));
+}
+
+/// The best object split of a small set by an exact sweep over each axis.
+fn sweep_sah(refs: &[PrimRef]) -> Option<(f32, Plan)> {
+    let n = refs.len();
+    let mut sorted = [PrimRef { lo: Vec3::ZERO, hi: Vec3::ZERO, id: 0 }; SWEEP_MAX];
+    let sorted = &mut sorted[..n];
+    let mut right = [0f32; SWEEP_MAX];
+    let mut best: Option<(f32, Plan)> = None;
+    for axis in 0..3 {
+        sorted.copy_from_slice(refs);
+        sort_along(sorted, axis);
+        let mut acc = Aabb::EMPTY;
+        for i in (1..n).rev() {
+            acc.merge(&Aabb { lo: sorted[i].lo, hi: sorted[i].hi });
+            right[i] = acc.half_area() * blocks(n - i);
+        }
+        let mut acc = Aabb::EMPTY;
+        for i in 0..n - 1 {
+            acc.merge(&Aabb { lo: sorted[i].lo, hi: sorted[i].hi });
+            let cost = acc.half_area() * blocks(i + 1) + right[i + 1];
+            if cost < best.map_or(f32::INFINITY, |b| b.0) {
+                best = Some((cost, Plan::Sweep { axis, left: i + 1 }));
+            }
+        }
+    }
+    best
+}
+
+/// The best SAH split of a set: (cost = Σ half-area × blocks, plan) by an exact sweep for
+/// small sets and by binning otherwise; `None` when all centroids coincide.
 fn find_sah(refs: &[PrimRef], b: &SetBounds) -> Option<(f32, Plan)> {
+    if b.cent.lo == b.cent.hi {
+        return None;
+    }
+    if refs.len() <= SWEEP_MAX {
+        return sweep_sah(refs);
+    }
     let ext = b.cent.hi - b.cent.lo;
     // Slightly under BINS so the largest centroid maps inside the last bin.
     let scale = Vec3::select(ext.cmpgt(Vec3::ZERO), (BINS as f32 * 0.99999) / ext, Vec3::ZERO);
@@ -241,16 +288,26 @@ fn find_sah(refs: &[PrimRef], b: &SetBounds) -> Option<(f32, Plan)> {
 fn partition(refs: &mut [PrimRef], b: &SetBounds, plan: Plan) -> (usize, SetBounds, SetBounds) {
     let mid = match plan {
         Plan::Sah { axis, bin, origin, scale } => {
+            // Bounds of both sides are gathered as the elements are classified.
+            let (mut lb, mut rb) = (SetBounds::EMPTY, SetBounds::EMPTY);
             let (mut i, mut j) = (0, refs.len());
             while i < j {
-                if bin_of(refs[i].c2()[axis], origin, scale) <= bin {
+                let r = refs[i];
+                if bin_of(r.c2()[axis], origin, scale) <= bin {
+                    lb.add(&r);
                     i += 1;
                 } else {
+                    rb.add(&r);
                     j -= 1;
                     refs.swap(i, j);
                 }
             }
-            i
+            debug_assert!(i > 0 && i < refs.len());
+            return (i, lb, rb);
+        }
+        Plan::Sweep { axis, left } => {
+            sort_along(refs, axis);
+            left
         }
         Plan::Median => {
             let axis = (b.cent.hi - b.cent.lo).max_position();
@@ -349,7 +406,14 @@ fn build_node(refs: &mut [PrimRef], set: Set, plan: Plan, depth: usize) -> Tmp {
 
 /// Appends `tmp` (a node) to `units`, then the packets of its leaf children, then its
 /// interior children's subtrees; returns the node's unit index.
-fn flatten(tmp: &[(Aabb, Tmp)], refs: &[PrimRef], tris: &[[Vec3; 3]], units: &mut Vec<Unit>) -> ChildRef {
+fn flatten(
+    tmp: &[(Aabb, Tmp)],
+    refs: &[PrimRef],
+    tris: &[[Vec3; 3]],
+    units: &mut Vec<Unit>,
+    nodes: &mut usize,
+) -> ChildRef {
+    *nodes += 1;
     let at = units.len();
     units.extend([Unit::default(); NODE_UNITS]);
     let mut node = Node::EMPTY;
@@ -370,7 +434,7 @@ fn flatten(tmp: &[(Aabb, Tmp)], refs: &[PrimRef], tris: &[[Vec3; 3]], units: &mu
     }
     for (slot, (b, kid)) in tmp.iter().enumerate() {
         if let Tmp::Node(kids) = kid {
-            let r = flatten(kids, refs, tris, units);
+            let r = flatten(kids, refs, tris, units, nodes);
             node.set(slot, b.lo, b.hi, r);
         }
     }
@@ -379,8 +443,8 @@ fn flatten(tmp: &[(Aabb, Tmp)], refs: &[PrimRef], tris: &[[Vec3; 3]], units: &mu
 }
 
 /// Builds the stored tree over `tris` (the root node at unit 0); empty when no triangle is
-/// finite.
-pub(super) fn build(tris: &[[Vec3; 3]]) -> Vec<Unit> {
+/// finite. Also returns the number of nodes.
+pub(super) fn build(tris: &[[Vec3; 3]]) -> (Vec<Unit>, usize) {
     // Two units per triangle at most: 5 per packet of 4, 7 per node of 8 leaves.
     assert!(tris.len() <= MAX_UNITS / 2, "too many triangles for one BVH ({})", tris.len());
     let mut refs: Vec<PrimRef> = tris
@@ -390,7 +454,7 @@ pub(super) fn build(tris: &[[Vec3; 3]]) -> Vec<Unit> {
         .map(|(i, t)| PrimRef { lo: t[0].min(t[1]).min(t[2]), hi: t[0].max(t[1]).max(t[2]), id: i as u32 })
         .collect();
     if refs.is_empty() {
-        return Vec::new();
+        return (Vec::new(), 0);
     }
     let bounds = refs
         .par_chunks(PARALLEL_BIN_MIN / 4)
@@ -405,6 +469,7 @@ pub(super) fn build(tris: &[[Vec3; 3]]) -> Vec<Unit> {
         },
     };
     let mut units = Vec::with_capacity(refs.len() * 3 / 2 + NODE_UNITS);
-    flatten(&tmp, &refs, tris, &mut units);
-    units
+    let mut nodes = 0;
+    flatten(&tmp, &refs, tris, &mut units, &mut nodes);
+    (units, nodes)
 }

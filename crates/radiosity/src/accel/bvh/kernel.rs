@@ -5,14 +5,18 @@
 //! operation order), which the tests rely on.
 //!
 //! Box test: the slab method (Kay & Kajiya 1986) with the near and far planes of each axis
-//! picked once per ray from the sign of the direction, so an inverted empty slot can never
-//! pass, and far distances scaled up by 1 + 4γ₃ so rounding can never cull a box the ray
-//! does meet (Ize 2013, "Robust BVH ray traversal"). Distances are (plane − origin) · (1/d),
-//! not the fused plane · (1/d) − origin · (1/d): the latter saves six operations per node
-//! but loses all precision near the origin of rays that start far from the world origin.
-//! Direction components below 10⁻¹⁸ are clamped (Embree's `rcp_safe`), so 1/d is finite
-//! and no slab can produce NaN (0·∞) — which would otherwise switch a slab's test off and
-//! make, say, every segment between two points of a flat floor visit most of the tree.
+//! picked once per ray from the sign of 1/d, so an inverted empty slot can never pass, and
+//! far distances scaled up by 1 + 4γ₃ so rounding can never cull a box the ray does meet
+//! (Ize 2013, "Robust BVH ray traversal"). Distances are (plane − origin) · (1/d), not the
+//! fused plane · (1/d) − origin · (1/d): the latter saves six operations per node but
+//! loses all precision near the origin of rays that start far from the world origin. A zero
+//! direction component gives 1/d = ±∞ and, for a ray lying exactly in a box face (a
+//! segment between two points of a flat floor), NaN = 0 · ∞: each slab distance enters
+//! `max`/`min` as the first operand, which x86's `maxps`/`minps` (and [`max_ps`] /
+//! [`min_ps`]) drop in favour of the second, so such a slab counts as entered — exactly
+//! right for a ray in the face's plane. (Clamping |d| away from zero, as Embree does,
+//! would cull those boxes, so that whether a segment grazing an edge in that plane is
+//! blocked would depend on the tree.)
 //!
 //! Triangle test: Möller & Trumbore (1997) in the form Embree uses (Wald et al. 2014): with
 //! n = e1 × e2, C = v0 − o, R = C × d, den = n·d the barycentrics
@@ -26,18 +30,16 @@ use super::Ray;
 
 /// 1 + 4γ₃ with γₙ = nε/(1 − nε), ε = 2⁻²⁴ (Pharr, Jakob & Humphreys, PBR 3rd ed. §3.9):
 /// far distances scaled by it exceed near distances whenever the exact ones do, covering
-/// the rounding of 1/d, of d·FAR_SCALE, of the subtraction and of the product.
+/// the rounding of 1/d, of (1/d)·FAR_SCALE, of the subtraction and of the product.
 pub(super) const FAR_SCALE: f32 = 1.0 + 4.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
-/// Direction components smaller than this are treated as this (Embree's `rcp_safe`).
-const MIN_DIR: f32 = 1e-18;
 
 /// A ray prepared for traversal.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct RayPre {
     pub org: [f32; 3],
     pub dir: [f32; 3],
-    /// 1/dir per axis, with |dir| clamped to at least [`MIN_DIR`].
+    /// 1/dir per axis (±∞ for a zero component).
     pub inv: [f32; 3],
     /// `inv · FAR_SCALE`: far-plane distances come out rounded up.
     pub inv_far: [f32; 3],
@@ -51,9 +53,9 @@ pub(super) struct RayPre {
 impl RayPre {
     #[inline(always)]
     pub fn new(ray: &Ray) -> RayPre {
-        // A zero (or tiny) component becomes 1/MIN_DIR: finite, so no slab computes 0·∞.
-        let inv = ray.dir.to_array().map(|d| 1.0 / if d.abs() < MIN_DIR { MIN_DIR } else { d });
-        let near = [0, 1, 2].map(|a| 2 * a + (inv[a] < 0.0) as usize);
+        let inv = ray.dir.recip().to_array();
+        // The sign of 1/d, not of d, so that d = −0 gives −∞ with the planes swapped.
+        let near = [0, 1, 2].map(|a| 2 * a + inv[a].is_sign_negative() as usize);
         RayPre {
             org: ray.origin.to_array(),
             dir: ray.dir.to_array(),
@@ -148,14 +150,8 @@ impl Kernel for Portable {
         let mut mask = 0;
         for i in 0..WIDTH {
             let slab = |a: usize, row: usize, inv: f32| (node[row].0[i] - ray.org[a]) * inv;
-            let tn = max_ps(
-                max_ps(slab(0, ray.near[0], ray.inv[0]), slab(1, ray.near[1], ray.inv[1])),
-                max_ps(slab(2, ray.near[2], ray.inv[2]), ray.tmin),
-            );
-            let tf = min_ps(
-                min_ps(slab(0, ray.far[0], ray.inv_far[0]), slab(1, ray.far[1], ray.inv_far[1])),
-                min_ps(slab(2, ray.far[2], ray.inv_far[2]), tmax),
-            );
+            let tn = max_ps(slab(2, ray.near[2], ray.inv[2]), max_ps(slab(1, ray.near[1], ray.inv[1]), max_ps(slab(0, ray.near[0], ray.inv[0]), ray.tmin)));
+            let tf = min_ps(slab(2, ray.far[2], ray.inv_far[2]), min_ps(slab(1, ray.far[1], ray.inv_far[1]), min_ps(slab(0, ray.far[0], ray.inv_far[0]), tmax)));
             dist[i] = tn;
             mask |= ((tn <= tf) as u32) << i;
         }

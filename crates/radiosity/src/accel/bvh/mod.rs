@@ -113,16 +113,14 @@ impl Bvh {
     /// Builds the hierarchy over `tris` (each three vertices). Degenerate triangles are
     /// kept (they are never hit); triangles with a non-finite coordinate are left out.
     pub fn build(tris: &[[Vec3; 3]]) -> Bvh {
-        let units = build::build(tris);
-        let mut bvh = Bvh {
+        let (units, nodes) = build::build(tris);
+        Bvh {
             units,
-            nodes: 0,
+            nodes,
             len: tris.len(),
             #[cfg(target_arch = "x86_64")]
             avx2: avx2::Avx2::detect(),
-        };
-        bvh.nodes = bvh.stats().nodes;
-        bvh
+        }
     }
 
     /// Number of triangles in the build input.

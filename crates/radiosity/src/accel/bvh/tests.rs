@@ -280,6 +280,74 @@ fn rays_leaving_surfaces_match_brute_force() {
 }
 
 #[test]
+fn segments_lying_in_a_floor_match_brute_force() {
+    // A floor at y = 0 of many triangles, walls meeting it (edges at y = 0),
+    // and segments between floor points: direction y is exactly 0 and the rays lie in the
+    // faces of every box flush with the floor. Whether such a segment is blocked by a
+    // wall's bottom edge must not depend on the tree.
+    let mut tris = Vec::new();
+    let n = 16;
+    for i in 0..n {
+        for j in 0..n {
+            let p = |a: usize, b: usize| Vec3::new(a as f32, 0.0, b as f32) * (1.0 / n as f32);
+            tris.push([p(i, j), p(i + 1, j), p(i + 1, j + 1)]);
+            tris.push([p(i, j), p(i + 1, j + 1), p(i, j + 1)]);
+        }
+    }
+    let mut r = rng(13);
+    for _ in 0..60 {
+        let a = Vec3::new(r.random(), 0.0, r.random());
+        let b = a + Vec3::new(r.random::<f32>() - 0.5, 0.0, r.random::<f32>() - 0.5) * 0.3;
+        // Half stand on the floor, half hang below it (boxes flush with the floor's top,
+        // like the sides of a table under a segment across its top).
+        let up = if r.random::<bool>() { 1.0 } else { -1.0 };
+        let h = Vec3::new(0.0, up * (r.random::<f32>() * 0.2 + 0.01), 0.0);
+        tris.push([a, b, b + h]);
+        tris.push([a, b + h, a + h]);
+    }
+    let floor = (2 * n * n) as u32;
+    let mut rays = Vec::new();
+    for _ in 0..3000 {
+        let a = Vec3::new(r.random(), 0.0, r.random());
+        let b = Vec3::new(r.random(), 0.0, r.random());
+        rays.push(Ray::new(a, b - a, 1e-4, 1.0 - 1e-4));
+        // And along the axes, with zero x or z too.
+        rays.push(Ray::new(a, Vec3::new(b.x - a.x, 0.0, 0.0), 1e-4, 1.0 - 1e-4));
+        rays.push(Ray::new(a, Vec3::new(0.0, -0.0, b.z - a.z), 1e-4, 1.0 - 1e-4));
+    }
+    let brute = Brute::new(&tris);
+    for (name, bvh) in kernels(&tris) {
+        let mut blocked = 0;
+        for ray in &rays {
+            // Floor triangles are coplanar with the segment: never hit.
+            let want = brute.closest(ray, |_| false);
+            assert!(want.is_none_or(|h| h.prim >= floor));
+            assert_eq!(bvh.intersect(ray), want, "{name}: {ray:?}");
+            assert_eq!(bvh.occluded(ray), want.is_some(), "{name}: {ray:?}");
+            blocked += want.is_some() as usize;
+        }
+        assert!(blocked > 500 && blocked < 8500, "{name}: {blocked} blocked");
+    }
+}
+
+#[test]
+fn non_finite_rays_hit_nothing() {
+    let tris = random_tris(200, 14);
+    for (_, bvh) in kernels(&tris) {
+        for (o, d) in [
+            (Vec3::splat(5.0), Vec3::NAN),
+            (Vec3::NAN, Vec3::X),
+            (Vec3::splat(f32::INFINITY), Vec3::X),
+            (Vec3::splat(5.0), Vec3::new(f32::INFINITY, 0.0, 0.0)),
+        ] {
+            let ray = Ray::new(o, d, 0.0, f32::INFINITY);
+            assert_eq!(bvh.intersect(&ray), None);
+            assert!(!bvh.occluded(&ray));
+        }
+    }
+}
+
+#[test]
 fn degenerate_and_non_finite_triangles_are_never_hit() {
     let mut tris = random_tris(300, 9);
     let p = Vec3::new(5.0, 5.0, 5.0);
@@ -371,4 +439,12 @@ fn tree_is_compact() {
     // About one packet per 2–4 triangles and one node per 8 leaves or so.
     assert!(bvh.node_count() < 20_000 / 8, "{} nodes", bvh.node_count());
     assert!(bvh.memory_bytes() < 20_000 * 120, "{} bytes", bvh.memory_bytes());
+    let st = bvh.stats();
+    assert_eq!(st.nodes, bvh.node_count());
+    // Every triangle sits in exactly one leaf; leaves hold 1–8 triangles in 1–2 packets.
+    assert!((st.triangles_per_leaf * st.leaves as f64 - 20_000.0).abs() < 0.5);
+    assert!((1.0..=8.0).contains(&st.triangles_per_leaf) && st.packets >= st.leaves && st.packets <= 2 * st.leaves);
+    assert!(st.children_per_node > 2.0 && st.children_per_node <= 8.0);
+    assert!(st.depth >= 4 && st.depth < 20, "depth {}", st.depth);
+    assert!(st.sah_nodes >= 1.0 && st.sah_leaves > 0.0);
 }

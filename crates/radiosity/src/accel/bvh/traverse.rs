@@ -60,7 +60,8 @@ impl<T: Copy + Default> Stack<T> {
 /// Closest hit with `tmin < t < tmax` among triangles with `skip(prim) == false`.
 #[inline(always)]
 pub(super) fn closest<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) -> bool) -> Option<Hit> {
-    if bvh.units.is_empty() {
+    // A NaN ray would pass every box test (NaN slabs are dropped) and hit nothing.
+    if bvh.units.is_empty() || !(ray.origin.is_finite() && ray.dir.is_finite()) {
         return None;
     }
     let r = RayPre::new(ray);
@@ -183,7 +184,7 @@ fn pop_closer(stack: &mut Stack<(ChildRef, f32)>, tmax: f32) -> Option<ChildRef>
 /// True if a triangle with `skip(prim) == false` is hit at `tmin < t < tmax`.
 #[inline(always)]
 pub(super) fn occluded<K: Kernel>(k: K, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) -> bool) -> bool {
-    if bvh.units.is_empty() {
+    if bvh.units.is_empty() || !(ray.origin.is_finite() && ray.dir.is_finite()) {
         return false;
     }
     let r = RayPre::new(ray);
