@@ -193,6 +193,21 @@ fn thread_cpu_seconds() -> f64 {
     0.0
 }
 
+/// CPU time consumed by the whole process (all threads), in seconds (Unix; 0 elsewhere).
+fn process_cpu_seconds() -> f64 {
+    #[cfg(unix)]
+    {
+        // SAFETY: an all-zero `rusage` is a valid value; getrusage writes into it.
+        let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
+        // SAFETY: `ru` is valid and writable for the duration of the call.
+        if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut ru) } == 0 {
+            let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+            return tv(ru.ru_utime) + tv(ru.ru_stime);
+        }
+    }
+    0.0
+}
+
 /// Seconds one backend took: wall clock, and CPU time summed over the tracing threads
 /// (which leaves out the time slices other processes got on a shared machine).
 #[derive(Clone, Copy, Default)]
@@ -244,6 +259,13 @@ fn rates(n: f64, runs: &[Secs]) -> Rates {
     Rates { wall: n / median(&mut w) / 1e6, cpu: n / median(&mut c) / 1e6 }
 }
 
+/// Median wall and CPU seconds (each taken separately).
+fn median_secs(v: &[Secs]) -> Secs {
+    let mut w: Vec<f64> = v.iter().map(|s| s.wall).collect();
+    let mut c: Vec<f64> = v.iter().map(|s| s.cpu).collect();
+    Secs { wall: median(&mut w), cpu: median(&mut c) }
+}
+
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     let n = v.len();
@@ -271,15 +293,15 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
     let n = a.rays as f64;
     let runs = a.runs;
 
-    // Build.
+    // Build: wall clock and process CPU time (all threads), medians over the runs.
     let mut ours_build = Vec::new();
     let mut bvh = Bvh::default();
     for _ in 0..runs {
-        let t = Instant::now();
+        let (c, t) = (process_cpu_seconds(), Instant::now());
         bvh = pool.install(|| Bvh::build(&tris));
-        ours_build.push(t.elapsed().as_secs_f64());
+        ours_build.push(Secs { wall: t.elapsed().as_secs_f64(), cpu: process_cpu_seconds() - c });
     }
-    let ours_build = median(&mut ours_build);
+    let ours_build = median_secs(&ours_build);
     let scene_rays = SceneRays::new(&scene.polygons);
 
     #[cfg(feature = "embree")]
@@ -294,9 +316,9 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
         for run in 0..runs {
             drop(emb.take());
             let rss0 = rss_bytes();
-            let t = Instant::now();
+            let (c, t) = (process_cpu_seconds(), Instant::now());
             let e = radiosity_embree::EmbreeScene::build(&tris, &config, radiosity_embree::Quality::Medium)?;
-            times.push(t.elapsed().as_secs_f64());
+            times.push(Secs { wall: t.elapsed().as_secs_f64(), cpu: process_cpu_seconds() - c });
             if run == 0 {
                 // Later builds reuse freed pages; only the first growth means something.
                 mem = rss_bytes().saturating_sub(rss0);
@@ -305,7 +327,7 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
         }
         let emb = emb.expect("runs > 0");
         println!("  embree {}", emb.describe());
-        (emb, median(&mut times), mem)
+        (emb, median_secs(&times), mem)
     };
 
     let st = bvh.stats();
@@ -322,16 +344,19 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
         st.sah_leaves
     );
     print!(
-        "  build      ours {:>9.2} ms  ({:.1} MiB)",
-        ours_build * 1e3,
+        "  build      ours {:>8.2} ms, CPU {:>8.2} ms ({:.1} MiB)",
+        ours_build.wall * 1e3,
+        ours_build.cpu * 1e3,
         bvh.memory_bytes() as f64 / (1 << 20) as f64
     );
     #[cfg(feature = "embree")]
     print!(
-        " | embree {:>9.2} ms (≈{:.1} MiB RSS) | ours/embree time {:.2}",
-        emb_build * 1e3,
+        " | embree {:>8.2} ms, CPU {:>8.2} ms (≈{:.1} MiB RSS) | ours/embree time {:.2} (CPU {:.2})",
+        emb_build.wall * 1e3,
+        emb_build.cpu * 1e3,
         emb_mem as f64 / (1 << 20) as f64,
-        ours_build / emb_build
+        ours_build.wall / emb_build.wall,
+        ours_build.cpu / emb_build.cpu
     );
     println!();
 
@@ -389,6 +414,23 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
     #[cfg(not(feature = "embree"))]
     let emb_r = None;
     report("any-hit", &ours, emb_r, &format!("occluded {:.1} %", blocked(&outs[0]) * 100.0));
+    #[cfg(feature = "embree")]
+    {
+        // Where the two disagree, is the segment in an axis-aligned plane (a zero direction
+        // component)? Embree clamps such components away from zero and so skips boxes the
+        // segment lies exactly on the face of; we count those as entered.
+        let differ: Vec<usize> = (0..a.rays).filter(|&i| outs[0][i] != outs[2][i]).collect();
+        let planar = differ.iter().filter(|&&i| set.segments[i].dir.to_array().contains(&0.0)).count();
+        let ours_only = differ.iter().filter(|&&i| outs[0][i]).count();
+        if !differ.is_empty() {
+            println!(
+                "  any-hit    {} segments differ: {} blocked for us only; {} lie in an axis-aligned plane",
+                differ.len(),
+                ours_only,
+                planar
+            );
+        }
+    }
     let vis = rates(n, &secs[1]);
     println!(
         "  visible    ours {:>6.2} Mrays/s, {:>6.2} per CPU-s  (SceneRays::visible: end polygons filtered; occluded {:.1} %)",
