@@ -54,8 +54,8 @@ pub struct RaysArgs {
     /// Seed of the ray sets.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Also time Embree's 8-ray packets (rtcIntersect8 / rtcOccluded8) on the same rays
-    /// (with --features embree).
+    /// Also race Embree's 8-ray packets (rtcIntersect8 / rtcOccluded8) on the same rays,
+    /// eight consecutive rays per packet (with --features embree).
     #[arg(long)]
     pub packets: bool,
     /// Extra Embree device configuration appended to `threads=N`, e.g. `isa=avx2` or
@@ -368,6 +368,22 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
     let emb_q = |_: usize, r: &Ray| emb.intersect(&to_embree(r)).map_or(MISS, |h| (h.t, h.prim));
     #[cfg(feature = "embree")]
     backends.push(&emb_q);
+    // Embree's 8-ray packets: the ray at each multiple of 8 traces itself and the next 7.
+    #[cfg(feature = "embree")]
+    let emb8_q = |i: usize, _: &Ray| {
+        if i % 8 != 0 {
+            return MISS;
+        }
+        let m = 8.min(set.closest.len() - i);
+        let rays: [_; 8] = std::array::from_fn(|k| to_embree(&set.closest[i + k.min(m - 1)]));
+        let mut out = [None; 8];
+        emb.intersect8(&rays[..m], &mut out);
+        out[0].map_or(MISS, |h| (h.t, h.prim))
+    };
+    #[cfg(feature = "embree")]
+    if a.packets {
+        backends.push(&emb8_q);
+    }
     let mut outs = vec![vec![MISS; a.rays]; backends.len()];
     let mut secs = vec![Vec::new(); backends.len()];
     for _ in 0..runs {
@@ -384,6 +400,10 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
     #[cfg(not(feature = "embree"))]
     let emb_r = None;
     report("closest", &ours, emb_r, &format!("hits {:.1} %", hits * 100.0));
+    #[cfg(feature = "embree")]
+    if a.packets {
+        packet_line("rtcIntersect8", &rates(n, &secs[1]), &rates(n, &secs[2]));
+    }
 
     // Any hit on segments; the solver's filtered visibility query races along.
     let ours_q = |_: usize, r: &Ray| bvh.occluded(r);
@@ -398,6 +418,21 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
     let emb_q = |_: usize, r: &Ray| emb.occluded(&to_embree(r));
     #[cfg(feature = "embree")]
     backends.push(&emb_q);
+    #[cfg(feature = "embree")]
+    let emb8_q = |i: usize, _: &Ray| {
+        if i % 8 != 0 {
+            return false;
+        }
+        let m = 8.min(set.segments.len() - i);
+        let rays: [_; 8] = std::array::from_fn(|k| to_embree(&set.segments[i + k.min(m - 1)]));
+        let mut out = [false; 8];
+        emb.occluded8(&rays[..m], &mut out);
+        out[0]
+    };
+    #[cfg(feature = "embree")]
+    if a.packets {
+        backends.push(&emb8_q);
+    }
     let mut outs = vec![vec![false; a.rays]; backends.len()];
     let mut secs = vec![Vec::new(); backends.len()];
     for _ in 0..runs {
@@ -431,6 +466,10 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
             );
         }
     }
+    #[cfg(feature = "embree")]
+    if a.packets {
+        packet_line("rtcOccluded8", &rates(n, &secs[2]), &rates(n, &secs[3]));
+    }
     let vis = rates(n, &secs[1]);
     println!(
         "  visible    ours {:>6.2} Mrays/s, {:>6.2} per CPU-s  (SceneRays::visible: end polygons filtered; occluded {:.1} %)",
@@ -439,34 +478,6 @@ fn bench_scene(spec: &str, scene: &radiosity::scene::Scene, a: &RaysArgs, pool: 
         blocked(&outs[1]) * 100.0
     );
 
-    #[cfg(feature = "embree")]
-    if a.packets {
-        let mut t8 = Vec::new();
-        let mut out = vec![None; a.rays];
-        let emb_rays: Vec<_> = set.closest.iter().map(to_embree).collect();
-        for _ in 0..runs {
-            let t = Instant::now();
-            pool.install(|| {
-                out.par_chunks_mut(8).zip(emb_rays.par_chunks(8)).for_each(|(o, r)| emb.intersect8(r, o))
-            });
-            t8.push(t.elapsed().as_secs_f64());
-        }
-        let mut o8 = Vec::new();
-        let mut occ = vec![false; a.rays];
-        let emb_segs: Vec<_> = set.segments.iter().map(to_embree).collect();
-        for _ in 0..runs {
-            let t = Instant::now();
-            pool.install(|| {
-                occ.par_chunks_mut(8).zip(emb_segs.par_chunks(8)).for_each(|(o, r)| emb.occluded8(r, o))
-            });
-            o8.push(t.elapsed().as_secs_f64());
-        }
-        println!(
-            "  packets    embree rtcIntersect8 {:>7.2} Mrays/s | rtcOccluded8 {:>7.2} Mrays/s (incoherent 8-ray packets)",
-            n / median(&mut t8) / 1e6,
-            n / median(&mut o8) / 1e6
-        );
-    }
     #[cfg(not(feature = "embree"))]
     if a.packets {
         println!("  packets    (need --features embree)");
@@ -488,6 +499,18 @@ fn report(what: &str, ours: &Rates, emb: Option<(Rates, f64)>, extra: &str) {
         );
     }
     println!(" | {extra}");
+}
+
+/// Embree's 8-ray packets against its single rays, raced in the same slices.
+#[cfg(feature = "embree")]
+fn packet_line(what: &str, single: &Rates, packet: &Rates) {
+    println!(
+        "  packets    embree {what} {:>6.2} Mrays/s, {:>6.2} per CPU-s | {:.2}× its single rays (CPU {:.2}×) (incoherent 8-ray packets)",
+        packet.wall,
+        packet.cpu,
+        packet.wall / single.wall,
+        packet.cpu / single.cpu
+    );
 }
 
 #[cfg(feature = "embree")]
