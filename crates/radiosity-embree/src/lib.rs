@@ -360,8 +360,8 @@ impl EmbreeScene {
         // SAFETY: `valid` and `p` are 32-byte-aligned locals living through the call, as
         // rtcIntersect8 requires.
         unsafe { ffi::rtcIntersect8(valid.0.as_ptr(), self.scene, &mut ctx, &mut p) };
-        for i in 0..rays.len() {
-            out[i] = (p.hit.geom_id[i] != ffi::RTC_INVALID_GEOMETRY_ID).then_some(EmbreeHit {
+        for (i, o) in out[..rays.len()].iter_mut().enumerate() {
+            *o = (p.hit.geom_id[i] != ffi::RTC_INVALID_GEOMETRY_ID).then_some(EmbreeHit {
                 t: p.ray.tfar[i],
                 u: p.hit.u[i],
                 v: p.hit.v[i],
@@ -390,8 +390,8 @@ impl EmbreeScene {
         let mut ctx = ffi::context();
         // SAFETY: as in `intersect8`.
         unsafe { ffi::rtcOccluded8(valid.0.as_ptr(), self.scene, &mut ctx, &mut p) };
-        for i in 0..rays.len() {
-            out[i] = p.tfar[i] == f32::NEG_INFINITY;
+        for (o, tfar) in out[..rays.len()].iter_mut().zip(p.tfar) {
+            *o = tfar == f32::NEG_INFINITY;
         }
     }
 }

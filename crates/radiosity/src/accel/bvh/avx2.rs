@@ -125,13 +125,15 @@ impl Kernel for Avx2 {
     }
 }
 
+// `unsafe fn` rather than a safe `#[target_feature]` fn (Rust ≥ 1.86) to keep the
+// workspace's rust-version 1.85; the callers below uphold the same contract.
 #[target_feature(enable = "avx2")]
-fn closest_avx2(k: Avx2, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) -> bool) -> Option<Hit> {
+unsafe fn closest_avx2(k: Avx2, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) -> bool) -> Option<Hit> {
     traverse::closest(k, bvh, ray, skip)
 }
 
 #[target_feature(enable = "avx2")]
-fn occluded_avx2(k: Avx2, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) -> bool) -> bool {
+unsafe fn occluded_avx2(k: Avx2, bvh: &Bvh, ray: &Ray, skip: impl Fn(u32) -> bool) -> bool {
     traverse::occluded(k, bvh, ray, skip)
 }
 

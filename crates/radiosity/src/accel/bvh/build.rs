@@ -164,8 +164,8 @@ impl Bins {
     fn add_all(&mut self, refs: &[PrimRef], origin: Vec3, scale: Vec3) {
         for r in refs {
             let b = ((r.c2() - origin) * scale).to_array();
-            for axis in 0..3 {
-                let i = (b[axis] as usize).min(BINS - 1);
+            for (axis, b) in b.into_iter().enumerate() {
+                let i = (b as usize).min(BINS - 1);
                 self.count[axis][i] += 1;
                 let bb = &mut self.bounds[axis][i];
                 bb.lo = bb.lo.min(r.lo);

@@ -25,6 +25,10 @@
 //! pass them. Edges count as inside (u, v ≥ 0, u + v ≤ 1); rays parallel to the plane
 //! (den = 0) and NaN inputs never hit.
 
+// The portable kernel's loops run over SIMD lanes and index several arrays by lane, as the
+// intrinsics do; iterator chains would hide that correspondence.
+#![allow(clippy::needless_range_loop)]
+
 use super::layout::{prow, NodeUnits, PacketUnits, PACKET, WIDTH};
 use super::Ray;
 

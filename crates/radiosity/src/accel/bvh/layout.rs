@@ -137,10 +137,10 @@ impl Node {
     }
 
     /// The stored form.
-    pub fn to_units(&self) -> NodeUnits {
+    pub fn to_units(self) -> NodeUnits {
         let mut u = [Unit::default(); NODE_UNITS];
-        for r in 0..6 {
-            u[r].0 = self.bounds[r];
+        for (unit, row) in u.iter_mut().zip(self.bounds) {
+            unit.0 = row;
         }
         u[6].0 = self.child.map(f32::from_bits);
         u
@@ -183,7 +183,7 @@ impl TriPacket {
     }
 
     /// The stored form.
-    pub fn to_units(&self) -> PacketUnits {
+    pub fn to_units(self) -> PacketUnits {
         let rows = [self.v0, self.e1, self.e2];
         let mut u = [Unit::default(); PACKET_UNITS];
         for k in 0..9 {
