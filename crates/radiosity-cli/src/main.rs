@@ -4,6 +4,7 @@
 //! One file per subcommand; each parses raw flags (clap) and validates them into the
 //! library's settings before any work starts.
 
+mod bench;
 mod common;
 mod compare;
 mod plot;
@@ -31,6 +32,9 @@ enum Command {
     Solve(solve::SolveArgs),
     /// Compare a rendered EXR with a reference EXR (relative RMSE, light-masked too).
     Compare(compare::CompareArgs),
+    /// Benchmarks (`bench rays`: BVH throughput on incoherent rays, against Embree with
+    /// `--features embree`).
+    Bench(bench::BenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -40,6 +44,7 @@ fn main() -> ExitCode {
         Command::Render(a) => render::run(a),
         Command::Solve(a) => solve::run(a),
         Command::Compare(a) => compare::run(a),
+        Command::Bench(a) => bench::run(a),
     };
     match result {
         Ok(code) => code,
