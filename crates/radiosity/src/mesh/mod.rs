@@ -10,6 +10,7 @@
 //! The target element size is in scene units; [`default_size`] scales with the scene.
 
 pub mod coverage;
+pub mod adaptive;
 mod uniform;
 
 use glam::DVec3;

@@ -96,7 +96,7 @@ impl PatchBuilder<'_> {
 }
 
 /// Rounds to ~40 significant bits so that points equal up to rounding share a key.
-fn round_key(x: f64) -> u64 {
+pub(super) fn round_key(x: f64) -> u64 {
     let b = (x + 0.0).to_bits(); // +0.0 folds -0.0 into 0.0
     (b + (1 << 11)) >> 12
 }
