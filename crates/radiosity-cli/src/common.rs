@@ -41,6 +41,8 @@ pub struct SolveFlags {
     /// Treat every surface as two-sided.
     #[arg(long)]
     pub two_sided: bool,
+    #[command(flatten)]
+    pub adaptive: AdaptiveFlags,
     /// Seed for every random choice (results do not depend on --threads).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -86,6 +88,7 @@ impl SolveFlags {
             },
             solver,
             solve: radiosity::solve::Options { tolerance: self.tolerance, max_iterations: self.max_iterations, time_budget },
+            adaptive: self.adaptive.options()?,
         })
     }
 
@@ -110,6 +113,68 @@ impl SolveFlags {
             eprintln!("warning: {w}");
         }
         Ok((scene, t.elapsed().as_secs_f64()))
+    }
+}
+
+/// Adaptive meshing (`radiosity::mesh::adaptive`).
+#[derive(Args, Debug, Clone)]
+pub struct AdaptiveFlags {
+    /// Refine the mesh where light changes fast (shadow boundaries, contact edges); then
+    /// --mesh-size is the size before refinement.
+    #[arg(long)]
+    pub adaptive: bool,
+    /// Refine an element whose estimated variation exceeds this fraction of the mean exitance.
+    #[arg(long, value_name = "T", requires = "adaptive")]
+    pub refine_threshold: Option<f64>,
+    /// Most elements after refinement.
+    #[arg(long, value_name = "N", requires = "adaptive")]
+    pub max_elements: Option<usize>,
+    /// Most levels of 1→4 splits below a uniform element.
+    #[arg(long, value_name = "N", requires = "adaptive")]
+    pub max_depth: Option<u32>,
+    /// Refinement passes after a solve, on the indirect light (each recomputes form factors).
+    #[arg(long, value_name = "N", requires = "adaptive")]
+    pub refine_passes: Option<usize>,
+    /// Criteria before solving: direct, contact, both or none.
+    #[arg(long, value_name = "WHICH", requires = "adaptive")]
+    pub refine_a_priori: Option<String>,
+}
+
+impl AdaptiveFlags {
+    /// The adaptive options, if --adaptive.
+    pub fn options(&self) -> Result<Option<radiosity::mesh::adaptive::Options>> {
+        if !self.adaptive {
+            return Ok(None);
+        }
+        let mut o = radiosity::mesh::adaptive::Options::default();
+        if let Some(t) = self.refine_threshold {
+            if !(t.is_finite() && t > 0.0) {
+                bail!("--refine-threshold must be a positive number, got {t}");
+            }
+            o.threshold = t;
+        }
+        if let Some(n) = self.max_elements {
+            o.max_elements = n;
+        }
+        if let Some(d) = self.max_depth {
+            if d > 12 {
+                bail!("--max-depth must be at most 12");
+            }
+            o.max_depth = d;
+        }
+        if let Some(p) = self.refine_passes {
+            o.passes = p;
+        }
+        if let Some(w) = &self.refine_a_priori {
+            (o.direct, o.contact) = match w.as_str() {
+                "both" => (true, true),
+                "direct" => (true, false),
+                "contact" => (false, true),
+                "none" => (false, false),
+                _ => bail!("--refine-a-priori must be direct, contact, both or none, got '{w}'"),
+            };
+        }
+        Ok(Some(o))
     }
 }
 

@@ -28,6 +28,9 @@ pub struct Settings {
     pub solver: Solver,
     /// Stopping rules.
     pub solve: solve::Options,
+    /// Adaptive refinement of the uniform mesh (None: uniform only). With it, `mesh_size`
+    /// is the size before refinement ([`mesh::adaptive::Options::base_size`] if None).
+    pub adaptive: Option<mesh::adaptive::Options>,
 }
 
 impl Default for Settings {
@@ -37,6 +40,7 @@ impl Default for Settings {
             form_factors: form_factor::Options::default(),
             solver: Solver::Jacobi,
             solve: solve::Options::default(),
+            adaptive: None,
         }
     }
 }
@@ -61,6 +65,8 @@ pub struct Solved {
     pub vertex_radiosity: Vec<Rgb>,
     /// Stage timings so far.
     pub timings: Timings,
+    /// Adaptive refinement, pass by pass (the a priori pass first); empty when uniform.
+    pub refinement: Vec<mesh::adaptive::PassStats>,
 }
 
 /// Per-element reflectance and emitted exitance.
@@ -74,36 +80,97 @@ pub fn element_materials(scene: &Scene, mesh: &Mesh) -> (Vec<Rgb>, Vec<Rgb>) {
         .unzip()
 }
 
-/// Meshes, builds the BVH, computes form factors and solves.
+/// Meshes, builds the BVH, computes form factors and solves. With
+/// [`Settings::adaptive`]: uniform mesh → a priori refinement → form factors → solve, then
+/// per a posteriori pass: refine on the solution → form factors and coverage of the new
+/// mesh, recomputed in full → solve again.
 pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Solved> {
     let mut timings = Timings::default();
-    let t = Instant::now();
-    let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
-    let mesh = mesh::mesh_uniform(&scene, size);
-    timings.mesh = t.elapsed().as_secs_f64();
-
     let t = Instant::now();
     let rays = SceneRays::new(&scene.polygons);
     timings.bvh = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let receivers = Receivers::compute(&scene, &mesh, &rays);
-    let (transport, mut ff_stats) =
-        form_factor::compute(&scene, &mesh, &rays, &receivers, &settings.form_factors, progress)?;
-    ff_stats.rays += receivers.rays;
-    timings.form_factors = t.elapsed().as_secs_f64();
+    let ad = settings.adaptive.as_ref();
+    let size = settings.mesh_size.unwrap_or_else(|| match ad {
+        Some(a) => a.base_size(&scene),
+        None => mesh::default_size(&scene),
+    });
+    let mut mesh = mesh::mesh_uniform(&scene, size);
+    let mut refinement = Vec::new();
+    let mut refiner = None;
+    let mut refine_rays = 0;
+    if let Some(a) = ad {
+        let mut r = mesh::adaptive::Refiner::new(&scene, &mesh);
+        let (stats, n) = mesh::adaptive::refine_a_priori(&scene, &rays, &mut r, a);
+        refine_rays += n;
+        refinement.push(stats);
+        mesh = r.mesh().clone();
+        refiner = Some(r);
+    }
+    timings.mesh = t.elapsed().as_secs_f64();
 
-    let t = Instant::now();
-    let (rho, emission) = element_materials(&scene, &mesh);
-    let area = receivers.open_areas(&mesh);
-    let system = System { transport: &transport, reflectance: &rho, emission: &emission, area: &area };
-    let solution = solve::solve(settings.solver, &system, &settings.solve, progress)?;
-    timings.solve = t.elapsed().as_secs_f64();
+    let mut pass = 0;
+    loop {
+        let t = Instant::now();
+        let receivers = Receivers::compute(&scene, &mesh, &rays);
+        let (transport, mut ff_stats) =
+            form_factor::compute(&scene, &mesh, &rays, &receivers, &settings.form_factors, progress)?;
+        ff_stats.rays += receivers.rays + refine_rays;
+        timings.form_factors += t.elapsed().as_secs_f64();
 
-    let t = Instant::now();
-    let vertex_radiosity = reconstruct::vertex_radiosity(&scene, &mesh, &solution.display_radiosity());
-    timings.reconstruct = t.elapsed().as_secs_f64();
-    Ok(Solved { scene, mesh, rays, receivers, transport, ff_stats, solution, vertex_radiosity, timings })
+        let t = Instant::now();
+        let (rho, emission) = element_materials(&scene, &mesh);
+        let area = receivers.open_areas(&mesh);
+        let system = System { transport: &transport, reflectance: &rho, emission: &emission, area: &area };
+        let solution = solve::solve(settings.solver, &system, &settings.solve, progress)?;
+        timings.solve += t.elapsed().as_secs_f64();
+
+        // A posteriori: refine where the indirect light that the final gather interpolates
+        // changes fast, then start over on the new mesh.
+        if let (Some(a), Some(r)) = (ad, refiner.as_mut()) {
+            if pass < a.passes && !progress.should_stop() {
+                pass += 1;
+                let t = Instant::now();
+                let h = indirect_irradiance(&scene, &mesh, &transport, &solution);
+                let errors = mesh::adaptive::a_posteriori_errors(&scene, &mesh, &h, &solution.radiosity);
+                let stats = r.refine(&errors, a);
+                timings.mesh += t.elapsed().as_secs_f64();
+                let changed = stats.splits > 0;
+                refinement.push(stats);
+                if changed {
+                    refine_rays = ff_stats.rays; // all rays so far, carried into the next pass
+                    mesh = r.mesh().clone();
+                    continue;
+                }
+            }
+        }
+        let t = Instant::now();
+        let vertex_radiosity = reconstruct::vertex_radiosity(&scene, &mesh, &solution.display_radiosity());
+        timings.reconstruct = t.elapsed().as_secs_f64();
+        return Ok(Solved {
+            scene,
+            mesh,
+            rays,
+            receivers,
+            transport,
+            ff_stats,
+            solution,
+            vertex_radiosity,
+            timings,
+            refinement,
+        });
+    }
+}
+
+/// Indirect irradiance per element, `(F·(B − E))_i`: light that has bounced at least once.
+pub fn indirect_irradiance(scene: &Scene, mesh: &Mesh, transport: &dyn Transport, solution: &Solution) -> Vec<Rgb> {
+    let (_, emission) = element_materials(scene, mesh);
+    let b = solution.display_radiosity();
+    let reflected: Vec<Rgb> = b.iter().zip(&emission).map(|(b, e)| (*b - *e).max(Rgb::ZERO)).collect();
+    let mut h = vec![Rgb::ZERO; b.len()];
+    transport.gather(&reflected, &mut h);
+    h
 }
 
 impl Solved {
@@ -171,11 +238,7 @@ impl Solved {
     /// Indirect irradiance per element, `(F·(B − E))_i` — light that has bounced at least
     /// once — and its per-vertex reconstruction (for the final gather).
     pub fn indirect_irradiance(&self) -> (Vec<Rgb>, Vec<Rgb>) {
-        let (_, emission) = element_materials(&self.scene, &self.mesh);
-        let b = self.solution.display_radiosity();
-        let reflected: Vec<Rgb> = b.iter().zip(&emission).map(|(b, e)| (*b - *e).max(Rgb::ZERO)).collect();
-        let mut h = vec![Rgb::ZERO; b.len()];
-        self.transport.gather(&reflected, &mut h);
+        let h = indirect_irradiance(&self.scene, &self.mesh, &self.transport, &self.solution);
         let hv = reconstruct::vertex_radiosity(&self.scene, &self.mesh, &h);
         (h, hv)
     }
@@ -222,6 +285,7 @@ impl Solved {
             images: Vec::new(),
             views: Vec::new(),
             warnings: self.scene.warnings.iter().map(|w| w.to_string()).collect(),
+            refinement: self.refinement.clone(),
         }
     }
 }

@@ -104,4 +104,7 @@ pub struct Report {
     pub views: Vec<ViewReport>,
     /// Warnings.
     pub warnings: Vec<String>,
+    /// Adaptive mesh refinement, pass by pass (absent for a uniform mesh).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub refinement: Vec<crate::mesh::adaptive::PassStats>,
 }
