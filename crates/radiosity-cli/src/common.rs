@@ -126,7 +126,7 @@ pub struct AdaptiveFlags {
     /// Refine an element whose estimated variation exceeds this fraction of the mean exitance.
     #[arg(long, value_name = "T", requires = "adaptive")]
     pub refine_threshold: Option<f64>,
-    /// Most elements after refinement.
+    /// Most elements after refinement [default: twice the uniform mesh's].
     #[arg(long, value_name = "N", requires = "adaptive")]
     pub max_elements: Option<usize>,
     /// Most levels of 1→4 splits below a uniform element.
@@ -153,9 +153,7 @@ impl AdaptiveFlags {
             }
             o.threshold = t;
         }
-        if let Some(n) = self.max_elements {
-            o.max_elements = n;
-        }
+        o.max_elements = self.max_elements;
         if let Some(d) = self.max_depth {
             if d > 12 {
                 bail!("--max-depth must be at most 12");

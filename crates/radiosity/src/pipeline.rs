@@ -28,8 +28,8 @@ pub struct Settings {
     pub solver: Solver,
     /// Stopping rules.
     pub solve: solve::Options,
-    /// Adaptive refinement of the uniform mesh (None: uniform only). With it, `mesh_size`
-    /// is the size before refinement ([`mesh::adaptive::Options::base_size`] if None).
+    /// Adaptive refinement of the uniform mesh (None: uniform only); `mesh_size` is then the
+    /// size before refinement.
     pub adaptive: Option<mesh::adaptive::Options>,
 }
 
@@ -92,10 +92,7 @@ pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -
 
     let t = Instant::now();
     let ad = settings.adaptive.as_ref();
-    let size = settings.mesh_size.unwrap_or_else(|| match ad {
-        Some(a) => a.base_size(&scene),
-        None => mesh::default_size(&scene),
-    });
+    let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
     let mut mesh = mesh::mesh_uniform(&scene, size);
     let mut refinement = Vec::new();
     let mut refiner = None;
