@@ -20,9 +20,10 @@ pub struct SolveFlags {
     /// Target element size in scene units [default: scene diagonal / 32].
     #[arg(long, value_name = "S")]
     pub mesh_size: Option<f64>,
-    /// Refuse meshes with more elements than this.
-    #[arg(long, value_name = "N", default_value_t = radiosity::pipeline::DEFAULT_MAX_ELEMENTS)]
-    pub max_elements: u64,
+    /// Most elements: a uniform mesh above this is refused [default: 200000]; with
+    /// --adaptive, also the limit of refinement [default: twice the uniform mesh's count].
+    #[arg(long, value_name = "N")]
+    pub max_elements: Option<u64>,
     /// Form-factor method.
     #[arg(long = "form-factors", value_name = "METHOD", default_value = "point-sampled")]
     pub form_factors: String,
@@ -49,6 +50,8 @@ pub struct SolveFlags {
     /// Treat every surface as two-sided.
     #[arg(long)]
     pub two_sided: bool,
+    #[command(flatten)]
+    pub adaptive: AdaptiveFlags,
     /// Seed for every random choice (results do not depend on --threads).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -109,7 +112,8 @@ impl SolveFlags {
                 rays: self.rays,
                 ..Default::default()
             },
-            max_elements: self.max_elements,
+            max_elements: self.max_elements.unwrap_or(radiosity::pipeline::DEFAULT_MAX_ELEMENTS),
+            adaptive: self.adaptive.options(self.max_elements)?,
         })
     }
 
@@ -139,6 +143,64 @@ impl SolveFlags {
             eprintln!("warning: {w}");
         }
         Ok((scene, t.elapsed().as_secs_f64()))
+    }
+}
+
+/// Adaptive meshing (`radiosity::mesh::adaptive`).
+#[derive(Args, Debug, Clone)]
+pub struct AdaptiveFlags {
+    /// Refine the mesh where light changes fast (shadow boundaries, contact edges); then
+    /// --mesh-size is the size before refinement.
+    #[arg(long)]
+    pub adaptive: bool,
+    /// Refine an element whose estimated variation exceeds this fraction of the mean exitance.
+    #[arg(long, value_name = "T", requires = "adaptive")]
+    pub refine_threshold: Option<f64>,
+    /// Most levels of 1→4 splits below a uniform element.
+    #[arg(long, value_name = "N", requires = "adaptive")]
+    pub max_depth: Option<u32>,
+    /// Refinement passes after a solve, on the indirect light (each recomputes form factors).
+    #[arg(long, value_name = "N", requires = "adaptive")]
+    pub refine_passes: Option<usize>,
+    /// Criteria before solving: direct, contact, both or none.
+    #[arg(long, value_name = "WHICH", requires = "adaptive")]
+    pub refine_a_priori: Option<String>,
+}
+
+impl AdaptiveFlags {
+    /// The adaptive options, if --adaptive.
+    /// `max_elements` is the shared --max-elements flag (the refinement limit here).
+    pub fn options(&self, max_elements: Option<u64>) -> Result<Option<radiosity::mesh::adaptive::Options>> {
+        if !self.adaptive {
+            return Ok(None);
+        }
+        let mut o = radiosity::mesh::adaptive::Options::default();
+        if let Some(t) = self.refine_threshold {
+            if !(t.is_finite() && t > 0.0) {
+                bail!("--refine-threshold must be a positive number, got {t}");
+            }
+            o.threshold = t;
+        }
+        o.max_elements = max_elements.map(|n| n as usize);
+        if let Some(d) = self.max_depth {
+            if d > 12 {
+                bail!("--max-depth must be at most 12");
+            }
+            o.max_depth = d;
+        }
+        if let Some(p) = self.refine_passes {
+            o.passes = p;
+        }
+        if let Some(w) = &self.refine_a_priori {
+            (o.direct, o.contact) = match w.as_str() {
+                "both" => (true, true),
+                "direct" => (true, false),
+                "contact" => (false, true),
+                "none" => (false, false),
+                _ => bail!("--refine-a-priori must be direct, contact, both or none, got '{w}'"),
+            };
+        }
+        Ok(Some(o))
     }
 }
 

@@ -2,6 +2,8 @@
 //! solve → reconstruct → render. Tests call these functions so that they test what users
 //! run. The stochastic solvers skip the form factors (they cast rays against the scene's
 //! polygons instead); [`solve_all`] runs every solver on one mesh and one set of form factors.
+//! With [`Settings::adaptive`] the uniform mesh is refined a priori before the first solve
+//! and, per a posteriori pass, on the solution, with coverage and form factors recomputed.
 
 use std::time::Instant;
 
@@ -15,7 +17,7 @@ use crate::render::{Image, PinholeCamera};
 use crate::report::{ComparisonRow, EnergyReport, ObjectReport, Report, Timings};
 use crate::scene::{Camera, Scene};
 use crate::solve::{self, IterationState, RaySystem, Solution, Solver, System};
-use crate::transport::SparseRows;
+use crate::transport::{SparseRows, Transport};
 use crate::{Error, Progress, Result, Rgb};
 
 /// Everything that decides a solution.
@@ -31,6 +33,9 @@ pub struct Settings {
     pub solve: solve::Options,
     /// Refuse meshes with more elements than this (form factors cost grows as n²).
     pub max_elements: u64,
+    /// Adaptive refinement of the uniform mesh (None: uniform only); `mesh_size` is then the
+    /// size before refinement.
+    pub adaptive: Option<mesh::adaptive::Options>,
 }
 
 impl Default for Settings {
@@ -41,6 +46,7 @@ impl Default for Settings {
             solver: Solver::Jacobi,
             solve: solve::Options::default(),
             max_elements: DEFAULT_MAX_ELEMENTS,
+            adaptive: None,
         }
     }
 }
@@ -68,6 +74,8 @@ pub struct Solved {
     pub vertex_radiosity: Vec<Rgb>,
     /// Stage timings so far.
     pub timings: Timings,
+    /// Adaptive refinement, pass by pass (empty for a uniform mesh).
+    pub refinement: Vec<mesh::adaptive::PassStats>,
 }
 
 /// Called after solver iterations with the scene and mesh being solved and the state
@@ -98,9 +106,17 @@ struct Prepared {
     emission: Vec<Rgb>,
     area: Vec<f64>,
     timings: Timings,
+    refinement: Vec<mesh::adaptive::PassStats>,
+    /// Rays cast by refinement so far (counted into the form-factor statistics).
+    refine_rays: u64,
 }
 
-fn prepare(scene: Scene, settings: &Settings, form_factors: bool, progress: &dyn Progress) -> Result<Prepared> {
+fn prepare(
+    scene: Scene,
+    settings: &Settings,
+    form_factors: bool,
+    progress: &dyn Progress,
+) -> Result<(Prepared, Option<mesh::adaptive::Refiner>)> {
     let mut timings = Timings::default();
     let t = Instant::now();
     let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
@@ -122,32 +138,73 @@ fn prepare(scene: Scene, settings: &Settings, form_factors: bool, progress: &dyn
             settings.max_elements
         )));
     }
-    let mesh = mesh::mesh_uniform(&scene, size);
+    let mut mesh = mesh::mesh_uniform(&scene, size);
     timings.mesh = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let rays = SceneRays::new(&scene.polygons);
     timings.bvh = t.elapsed().as_secs_f64();
 
-    let (receivers, transport, ff_stats) = if form_factors {
-        let t = Instant::now();
-        let receivers = Receivers::compute(&scene, &mesh, &rays);
-        let (transport, mut ff_stats) =
-            form_factor::compute(&scene, &mesh, &rays, &receivers, &settings.form_factors, progress)?;
-        ff_stats.rays += receivers.rays;
-        timings.form_factors = t.elapsed().as_secs_f64();
-        (receivers, Some(transport), Some(ff_stats))
-    } else {
-        (Receivers::all_open(&mesh), None, None)
+    // A priori refinement (direct-light bends, contact lines) before any solve.
+    let t = Instant::now();
+    let mut refinement = Vec::new();
+    let mut refine_rays = 0;
+    let refiner = match &settings.adaptive {
+        Some(a) => {
+            let mut r = mesh::adaptive::Refiner::new(&scene, &mesh);
+            let (stats, n) = mesh::adaptive::refine_a_priori(&scene, &rays, &mut r, a);
+            refine_rays += n;
+            refinement.push(stats);
+            mesh = r.mesh().clone();
+            Some(r)
+        }
+        None => None,
     };
-    let (reflectance, emission) = element_materials(&scene, &mesh);
-    // Covered parts of elements neither emit nor reflect: the power formulation and the
-    // residual use the open areas.
-    let area = receivers.open_areas(&mesh);
-    Ok(Prepared { scene, mesh, rays, receivers, transport, ff_stats, reflectance, emission, area, timings })
+    timings.mesh += t.elapsed().as_secs_f64();
+    let prepared = Prepared {
+        scene,
+        mesh,
+        rays,
+        receivers: Receivers::default(),
+        transport: None,
+        ff_stats: None,
+        reflectance: Vec::new(),
+        emission: Vec::new(),
+        area: Vec::new(),
+        timings,
+        refinement,
+        refine_rays,
+    };
+    Ok((prepared.with_factors(settings, form_factors, progress)?, refiner))
 }
 
 impl Prepared {
+    /// (Re)computes coverage, form factors and the per-element system for the current mesh.
+    fn with_factors(mut self, settings: &Settings, form_factors: bool, progress: &dyn Progress) -> Result<Prepared> {
+        let (scene, mesh, rays) = (&self.scene, &self.mesh, &self.rays);
+        let (receivers, transport, ff_stats) = if form_factors {
+            let t = Instant::now();
+            let receivers = Receivers::compute(scene, mesh, rays);
+            let (transport, mut ff_stats) =
+                form_factor::compute(scene, mesh, rays, &receivers, &settings.form_factors, progress)?;
+            ff_stats.rays += receivers.rays + self.refine_rays;
+            self.timings.form_factors += t.elapsed().as_secs_f64();
+            (receivers, Some(transport), Some(ff_stats))
+        } else {
+            (Receivers::all_open(mesh), None, None)
+        };
+        let (reflectance, emission) = element_materials(scene, mesh);
+        // Covered parts of elements neither emit nor reflect: the power formulation and the
+        // residual use the open areas.
+        self.area = receivers.open_areas(mesh);
+        self.reflectance = reflectance;
+        self.emission = emission;
+        self.receivers = receivers;
+        self.transport = transport;
+        self.ff_stats = ff_stats;
+        Ok(self)
+    }
+
     fn solve(&self, solver: Solver, opts: &solve::Options, progress: &dyn Progress, observer: Option<&mut FrameObserver<'_>>) -> Result<Solution> {
         let (scene, mesh) = (&self.scene, &self.mesh);
         let mut adapter;
@@ -184,6 +241,7 @@ impl Prepared {
             solution,
             vertex_radiosity,
             timings,
+            refinement: self.refinement,
         }
     }
 }
@@ -194,19 +252,58 @@ pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -
     solve_scene_observed(scene, settings, progress, None)
 }
 
-/// [`solve_scene`], calling `observer` after solver iterations.
+/// [`solve_scene`], calling `observer` after solver iterations (of every adaptive pass).
 pub fn solve_scene_observed(
     scene: Scene,
     settings: &Settings,
     progress: &dyn Progress,
-    observer: Option<&mut FrameObserver<'_>>,
+    mut observer: Option<&mut FrameObserver<'_>>,
 ) -> Result<Solved> {
     let stochastic = settings.solver.is_stochastic();
-    let prepared = prepare(scene, settings, !stochastic, progress)?;
-    let t = Instant::now();
-    let solution = prepared.solve(settings.solver, &settings.solve, progress, observer)?;
-    let seconds = t.elapsed().as_secs_f64();
-    Ok(prepared.finish(solution, seconds))
+    let (mut prepared, mut refiner) = prepare(scene, settings, !stochastic, progress)?;
+    let mut pass = 0;
+    let mut seconds = 0.0;
+    loop {
+        let t = Instant::now();
+        let obs: Option<&mut FrameObserver<'_>> = match observer.as_mut() {
+            Some(o) => Some(&mut **o),
+            None => None,
+        };
+        let solution = prepared.solve(settings.solver, &settings.solve, progress, obs)?;
+        seconds += t.elapsed().as_secs_f64();
+        // A posteriori: refine where the indirect light that the final gather interpolates
+        // changes fast, then recompute coverage and form factors for the new mesh.
+        if let (Some(a), Some(r), Some(transport)) = (&settings.adaptive, refiner.as_mut(), prepared.transport.as_ref()) {
+            if pass < a.passes && !progress.should_stop() {
+                pass += 1;
+                let t = Instant::now();
+                let h = indirect_irradiance(&prepared.scene, &prepared.mesh, transport, &solution);
+                let errors = mesh::adaptive::a_posteriori_errors(&prepared.scene, &prepared.mesh, &h, &solution.radiosity);
+                let stats = r.refine(&errors, a);
+                prepared.timings.mesh += t.elapsed().as_secs_f64();
+                let changed = stats.splits > 0;
+                prepared.refinement.push(stats);
+                if changed {
+                    prepared.refine_rays = prepared.ff_stats.as_ref().map_or(0, |f| f.rays);
+                    prepared.mesh = r.mesh().clone();
+                    prepared = prepared.with_factors(settings, true, progress)?;
+                    continue;
+                }
+            }
+        }
+        return Ok(prepared.finish(solution, seconds));
+    }
+}
+
+/// Indirect irradiance per element, `(F·(B − E))_i`: the light that has bounced at least
+/// once (what the final gather interpolates, and what a posteriori refinement watches).
+pub fn indirect_irradiance(scene: &Scene, mesh: &Mesh, transport: &dyn Transport, solution: &Solution) -> Vec<Rgb> {
+    let (_, emission) = element_materials(scene, mesh);
+    let b = solution.display_radiosity();
+    let reflected: Vec<Rgb> = b.iter().zip(&emission).map(|(b, e)| (*b - *e).max(Rgb::ZERO)).collect();
+    let mut h = vec![Rgb::ZERO; b.len()];
+    transport.gather(&reflected, &mut h);
+    h
 }
 
 /// One solver's run in [`solve_all`].
@@ -234,7 +331,7 @@ pub struct Comparison {
 /// (`settings.solver` is ignored), for comparison. After an interrupt the solver running
 /// keeps what it has and the remaining ones are skipped.
 pub fn solve_all(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Comparison> {
-    let prepared = prepare(scene, settings, true, progress)?;
+    let (prepared, _) = prepare(scene, settings, true, progress)?;
     let mut runs = Vec::new();
     let mut seconds = 0.0;
     for solver in Solver::ALL {
@@ -381,12 +478,7 @@ impl Solved {
         let (rho, emission) = element_materials(&self.scene, &self.mesh);
         let b = self.solution.display_radiosity();
         let h: Vec<Rgb> = match &self.transport {
-            Some(f) => {
-                let reflected: Vec<Rgb> = b.iter().zip(&emission).map(|(b, e)| (*b - *e).max(Rgb::ZERO)).collect();
-                let mut h = vec![Rgb::ZERO; b.len()];
-                crate::transport::Transport::gather(f, &reflected, &mut h);
-                h
-            }
+            Some(f) => indirect_irradiance(&self.scene, &self.mesh, f, &self.solution),
             None => {
                 let ems = gather::emitters(&self.scene);
                 let mut rng = crate::sampling::rng_for(0x1d1, 0);
@@ -455,6 +547,7 @@ impl Solved {
             objects: self.objects(),
             images: Vec::new(),
             warnings: self.scene.warnings.iter().map(|w| w.to_string()).collect(),
+            refinement: self.refinement.clone(),
             ..Default::default()
         }
     }

@@ -154,4 +154,7 @@ pub struct Report {
     /// `solve --solver all`: every solver on this scene.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub comparison: Vec<ComparisonRow>,
+    /// Adaptive mesh refinement, pass by pass (absent for a uniform mesh).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub refinement: Vec<crate::mesh::adaptive::PassStats>,
 }

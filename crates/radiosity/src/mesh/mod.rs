@@ -10,6 +10,7 @@
 //! The target element size is in scene units; [`default_size`] scales with the scene.
 
 pub mod coverage;
+pub mod adaptive;
 mod uniform;
 
 use glam::DVec3;
@@ -125,8 +126,8 @@ impl Mesh {
     }
 }
 
-/// The default element size: 1/32 of the scene's bounding-box diagonal (about 3,400
-/// elements for the Cornell box, whose per-object radiance is then within 0.3 % of the
+/// The default element size: 1/32 of the scene's bounding-box diagonal (about 2,700
+/// elements for the Cornell box, whose per-object radiance is then within 0.5 % of the
 /// path-traced reference).
 pub fn default_size(scene: &Scene) -> f64 {
     scene.diagonal() / 32.0
