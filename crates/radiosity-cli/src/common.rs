@@ -17,7 +17,7 @@ pub struct SolveFlags {
     /// Scene: a file (.obj, .gltf, .glb, .toml) or a built-in name (cornell, furnace).
     #[arg(default_value = "cornell")]
     pub scene: String,
-    /// Target element size in scene units [default: scene diagonal / 32].
+    /// Target element size in scene units [default: scene diagonal / 36].
     #[arg(long, value_name = "S")]
     pub mesh_size: Option<f64>,
     /// Most elements: a uniform mesh above this is refused [default: 200000]; with
