@@ -13,139 +13,95 @@
 //! furnace test needs. Each row draws from its own random stream (seed, row), so results
 //! do not depend on the thread count.
 
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-
-use glam::DVec3;
-use rayon::prelude::*;
-
 use super::kernel::point_to_polygon;
-use super::Options;
-use crate::accel::SceneRays;
-use crate::mesh::Mesh;
+use super::{Context, RowSource};
 use crate::sampling::{rng_for, stratified};
-use crate::scene::Scene;
-use crate::transport::SparseRows;
-use crate::{Error, Progress, Result};
 
-pub(super) fn compute(
-    scene: &Scene,
-    mesh: &Mesh,
-    rays: &SceneRays,
-    opts: &Options,
-    progress: &dyn Progress,
-) -> Result<(SparseRows, u64)> {
-    let n = mesh.len();
-    progress.begin("form factors", n as u64);
-    let ray_count = AtomicU64::new(0);
-    let stopped = AtomicBool::new(false);
-    // Per-patch plane (point, normal) for culling whole patches.
-    let planes: Vec<(DVec3, DVec3)> = scene.polygons.iter().map(|p| (p.vertices[0], p.normal)).collect();
-    let diag = scene.diagonal();
-    let eps = 1e-9 * diag;
+pub(crate) struct Rows<'a> {
+    ctx: &'a Context<'a>,
+}
 
-    let rows: Vec<Vec<(u32, f32)>> = (0..n)
-        .into_par_iter()
-        .with_min_len(4)
-        .map_init(
-            || (Vec::new(), Vec::new(), Vec::new(), u32::MAX, Vec::<u32>::new()),
-            |(recv_pts, vis_pts, row, cached_patch, patch_list), i| {
-                if stopped.load(Ordering::Relaxed) {
-                    return Vec::new();
-                }
-                if i % 64 == 0 && progress.should_stop() {
-                    stopped.store(true, Ordering::Relaxed);
-                    return Vec::new();
-                }
-                let ei = &mesh.elements[i];
-                let pi = ei.patch;
-                // Patches that can exchange light with patch `pi` at all: some vertex in
-                // front of pi's plane and some vertex of pi in front of theirs.
-                if *cached_patch != pi {
-                    *cached_patch = pi;
-                    patch_list.clear();
-                    let (ci, ni) = planes[pi as usize];
-                    let poly_i = &scene.polygons[pi as usize];
-                    for (q, poly) in scene.polygons.iter().enumerate() {
-                        if q as u32 == pi {
-                            continue;
-                        }
-                        let (cq, nq) = planes[q];
-                        let q_in_front = poly.vertices.iter().any(|v| ni.dot(*v - ci) > eps);
-                        let i_in_front = poly_i.vertices.iter().any(|v| nq.dot(*v - cq) > eps);
-                        if q_in_front && i_in_front {
-                            patch_list.push(q as u32);
-                        }
-                    }
-                }
-                let mut rng = rng_for(opts.seed, i as u64);
-                let size_i = ei.area.sqrt();
-                let mut nrays = 0u64;
-                row.clear();
-                for &q in patch_list.iter() {
-                    let pe = mesh.patches[q as usize];
-                    for j in pe.first..pe.first + pe.count {
-                        let ej = &mesh.elements[j as usize];
-                        let (cj, nv) = ej.corners(&mesh.positions);
-                        let cj = &cj[..nv];
-                        // Element-level cull.
-                        if !cj.iter().any(|v| ei.normal.dot(*v - ei.centroid) > eps) {
-                            continue;
-                        }
-                        let d = (ej.centroid - ei.centroid).length();
-                        let size_j = ej.area.sqrt();
-                        let ratio = size_i.max(size_j) / d.max(1e-300);
-                        let k = if ratio < 0.25 {
-                            1
-                        } else if ratio < 0.6 {
-                            2
-                        } else {
-                            opts.max_receiver_samples.max(1)
-                        }
-                        .min(opts.max_receiver_samples.max(1));
-                        stratified(k, &mut rng, recv_pts);
-                        let kv = opts.visibility_samples.max(1);
-                        let mut sum = 0.0;
-                        for &(u, v) in recv_pts.iter() {
-                            let x = ei.point(&mesh.positions, u, v);
-                            let f = point_to_polygon(x, ei.normal, cj, ej.normal);
-                            if f <= 0.0 {
-                                continue;
-                            }
-                            stratified(kv, &mut rng, vis_pts);
-                            let mut seen = 0u32;
-                            let mut tried = 0u32;
-                            for &(a, b) in vis_pts.iter() {
-                                let y = ej.point(&mesh.positions, a, b);
-                                if ei.normal.dot(y - x) <= 0.0 {
-                                    continue;
-                                }
-                                tried += 1;
-                                if rays.visible(x, pi, y, q) {
-                                    seen += 1;
-                                }
-                            }
-                            nrays += tried as u64;
-                            let vis = if tried == 0 { 1.0 } else { seen as f64 / tried as f64 };
-                            sum += f * vis;
-                        }
-                        let fij = sum / recv_pts.len() as f64;
-                        if fij > 0.0 {
-                            row.push((j, fij as f32));
-                        }
-                    }
-                }
-                ray_count.fetch_add(nrays, Ordering::Relaxed);
-                progress.advance(1);
-                let mut r = std::mem::take(row);
-                r.sort_unstable_by_key(|e| e.0);
-                r.shrink_to_fit();
-                r
-            },
-        )
-        .collect();
-    progress.end();
-    if stopped.load(Ordering::Relaxed) {
-        return Err(Error::Cancelled);
+impl<'a> Rows<'a> {
+    pub fn new(ctx: &'a Context<'a>) -> Self {
+        Rows { ctx }
     }
-    Ok((SparseRows::from_rows(rows), ray_count.load(Ordering::Relaxed)))
+}
+
+/// Receiver points, visibility points, the patch the list is for, its facing patches.
+pub(crate) type Scratch = (Vec<(f64, f64)>, Vec<(f64, f64)>, u32, Vec<u32>);
+
+impl RowSource for Rows<'_> {
+    type Scratch = Scratch;
+
+    fn scratch(&self) -> Scratch {
+        (Vec::new(), Vec::new(), u32::MAX, Vec::new())
+    }
+
+    fn row(&self, i: usize, s: &mut Scratch, row: &mut Vec<(u32, f64)>) -> u64 {
+        let (recv_pts, vis_pts, cached_patch, patch_list) = s;
+        let (mesh, rays, opts, eps) = (self.ctx.mesh, self.ctx.rays, self.ctx.opts, self.ctx.eps);
+        let ei = &mesh.elements[i];
+        let pi = ei.patch;
+        if *cached_patch != pi {
+            *cached_patch = pi;
+            self.ctx.facing_patches(pi, patch_list);
+        }
+        let mut rng = rng_for(opts.seed, i as u64);
+        let size_i = ei.area.sqrt();
+        let mut nrays = 0u64;
+        for &q in patch_list.iter() {
+            let pe = mesh.patches[q as usize];
+            for j in pe.first..pe.first + pe.count {
+                let ej = &mesh.elements[j as usize];
+                let (cj, nv) = ej.corners(&mesh.positions);
+                let cj = &cj[..nv];
+                // Element-level cull.
+                if !cj.iter().any(|v| ei.normal.dot(*v - ei.centroid) > eps) {
+                    continue;
+                }
+                let d = (ej.centroid - ei.centroid).length();
+                let size_j = ej.area.sqrt();
+                let ratio = size_i.max(size_j) / d.max(1e-300);
+                let k = if ratio < 0.25 {
+                    1
+                } else if ratio < 0.6 {
+                    2
+                } else {
+                    opts.max_receiver_samples.max(1)
+                }
+                .min(opts.max_receiver_samples.max(1));
+                stratified(k, &mut rng, recv_pts);
+                let kv = opts.visibility_samples.max(1);
+                let mut sum = 0.0;
+                for &(u, v) in recv_pts.iter() {
+                    let x = ei.point(&mesh.positions, u, v);
+                    let f = point_to_polygon(x, ei.normal, cj, ej.normal);
+                    if f <= 0.0 {
+                        continue;
+                    }
+                    stratified(kv, &mut rng, vis_pts);
+                    let mut seen = 0u32;
+                    let mut tried = 0u32;
+                    for &(a, b) in vis_pts.iter() {
+                        let y = ej.point(&mesh.positions, a, b);
+                        if ei.normal.dot(y - x) <= 0.0 {
+                            continue;
+                        }
+                        tried += 1;
+                        if rays.visible(x, pi, y, q) {
+                            seen += 1;
+                        }
+                    }
+                    nrays += tried as u64;
+                    let vis = if tried == 0 { 1.0 } else { seen as f64 / tried as f64 };
+                    sum += f * vis;
+                }
+                let fij = sum / recv_pts.len() as f64;
+                if fij > 0.0 {
+                    row.push((j, fij));
+                }
+            }
+        }
+        nrays
+    }
 }
