@@ -9,6 +9,7 @@ mod compare;
 mod progress;
 mod render;
 mod solve;
+mod viewfactors;
 
 use std::process::ExitCode;
 
@@ -30,6 +31,8 @@ enum Command {
     Solve(solve::SolveArgs),
     /// Compare a rendered EXR with a reference EXR (relative RMSE, light-masked too).
     Compare(compare::CompareArgs),
+    /// Compute a view-factor matrix (CSV, NumPy .npy, JSON or View3D text) with diagnostics.
+    Viewfactors(viewfactors::ViewfactorsArgs),
 }
 
 fn main() -> ExitCode {
@@ -39,6 +42,7 @@ fn main() -> ExitCode {
         Command::Render(a) => render::run(a),
         Command::Solve(a) => solve::run(a),
         Command::Compare(a) => compare::run(a),
+        Command::Viewfactors(a) => viewfactors::run(a),
     };
     match result {
         Ok(code) => code,
