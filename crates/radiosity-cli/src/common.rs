@@ -17,14 +17,17 @@ pub struct SolveFlags {
     /// Scene: a file (.obj, .gltf, .glb, .toml) or a built-in name (cornell, furnace).
     #[arg(default_value = "cornell")]
     pub scene: String,
-    /// Target element size in scene units [default: scene diagonal / 40].
+    /// Target element size in scene units [default: scene diagonal / 32].
     #[arg(long, value_name = "S")]
     pub mesh_size: Option<f64>,
+    /// Refuse meshes with more elements than this.
+    #[arg(long, value_name = "N", default_value_t = radiosity::pipeline::DEFAULT_MAX_ELEMENTS)]
+    pub max_elements: u64,
     /// Form-factor method.
     #[arg(long = "form-factors", value_name = "METHOD", default_value = "point-sampled")]
     pub form_factors: String,
     /// Visibility rays per receiver point (n × n).
-    #[arg(long, value_name = "N", default_value_t = 2)]
+    #[arg(long, value_name = "N", default_value_t = 1)]
     pub visibility_samples: usize,
     #[command(flatten)]
     pub ff: FormFactorTuning,
@@ -83,6 +86,7 @@ impl SolveFlags {
             form_factors: self.ff.options(method, self.seed, self.visibility_samples)?,
             solver,
             solve: radiosity::solve::Options { tolerance: self.tolerance, max_iterations: self.max_iterations, time_budget },
+            max_elements: self.max_elements,
         })
     }
 
@@ -141,10 +145,12 @@ impl FormFactorTuning {
     }
 }
 
-/// Writes `bytes` to `path` atomically (temporary file in the same folder, then rename).
+/// Writes `bytes` to `path` atomically (temporary file in the same folder, then rename),
+/// creating the folder if needed.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let name = path.file_name().with_context(|| format!("{}: not a file name", path.display()))?;
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create folder {}", dir.display()))?;
     let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
     std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;

@@ -33,7 +33,12 @@ pub fn run(a: CompareArgs) -> Result<ExitCode> {
     let reference = output::exr::read(&a.reference)?;
     let all = metrics::relative_rmse(&img, &reference, None)?;
     let mask = metrics::light_mask(&reference, a.light_threshold);
-    let masked = metrics::relative_rmse(&img, &reference, Some(&mask))?;
+    let masked = metrics::relative_rmse(&img, &reference, Some(&mask)).map_err(|_| {
+        anyhow::anyhow!(
+            "every reference pixel is above --light-threshold {} (or next to one); raise the threshold for this scene's units",
+            a.light_threshold
+        )
+    })?;
     if a.json {
         println!(
             "{}",

@@ -46,6 +46,10 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(code) => code,
+        Err(e) if matches!(e.downcast_ref::<radiosity::Error>(), Some(radiosity::Error::Cancelled)) => {
+            eprintln!("interrupted before a solution existed (during form factors): no output written");
+            ExitCode::from(130)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(1)

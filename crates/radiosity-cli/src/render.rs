@@ -8,7 +8,9 @@ use anyhow::{bail, Result};
 use clap::Args;
 use glam::DVec3;
 use radiosity::output;
+use radiosity::report::ViewReport;
 use radiosity::pipeline::solve_scene;
+use radiosity::render::gather;
 use radiosity::render::gouraud::{self, ElementTracer, Shading};
 use radiosity::scene::Camera;
 
@@ -27,8 +29,12 @@ pub struct RenderArgs {
     #[arg(long, value_name = "FILE")]
     pub exr: Option<PathBuf>,
     /// Camera JSON (position, look_at, up, vfov_deg), as ../shared/scenes/cornell-box/camera.json.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "views")]
     pub camera: Option<PathBuf>,
+    /// Several views rendered from one solve: a JSON array of cameras (each may have a
+    /// "name"). Outputs are named <output stem>_<view name>.png (and .exr).
+    #[arg(long, value_name = "FILE")]
+    pub views: Option<PathBuf>,
     /// Camera position x,y,z (overrides the scene's camera).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     pub eye: Option<DVec3>,
@@ -47,12 +53,18 @@ pub struct RenderArgs {
     /// Image height in pixels.
     #[arg(long, default_value_t = 512)]
     pub height: usize,
-    /// Samples per pixel along each axis (box filter).
-    #[arg(long, value_name = "N", default_value_t = 3)]
-    pub spp: usize,
-    /// Shading: gouraud (interpolated from vertices) or flat (one value per element).
-    #[arg(long, value_name = "MODE", default_value = "gouraud")]
-    pub shading: String,
+    /// Samples per pixel along each axis (box filter) [default: 6 for gather, 3 for
+    /// gouraud and flat].
+    #[arg(long, value_name = "N")]
+    pub spp: Option<usize>,
+    /// Image reconstruction: gather (direct light per pixel, indirect from the solution;
+    /// matches a path tracer), gouraud (radiosity interpolated from vertices; instant
+    /// preview) or flat (one value per element).
+    #[arg(long = "render", value_name = "MODE", default_value = "gather")]
+    pub mode: String,
+    /// Final gather: shadow rays per pixel sample and emitter, as N × N.
+    #[arg(long, value_name = "N", default_value_t = 2)]
+    pub shadow_rays: usize,
     /// PNG exposure: radiance is multiplied by this before sRGB encoding [default: automatic].
     #[arg(long, value_name = "SCALE")]
     pub exposure: Option<f64>,
@@ -76,14 +88,19 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
         bail!("--width and --height must be between 1 and 16384");
     }
-    if a.spp == 0 || a.spp > 64 {
+    let spp = a.spp.unwrap_or(if a.mode == "gather" { 6 } else { 3 });
+    if spp == 0 || spp > 64 {
         bail!("--spp must be between 1 and 64");
     }
-    let shading = match a.shading.as_str() {
-        "gouraud" => Shading::Gouraud,
+    let shading = match a.mode.as_str() {
+        "gouraud" | "gather" => Shading::Gouraud,
         "flat" => Shading::Flat,
-        s => bail!("unknown --shading '{s}' (known: gouraud, flat)"),
+        s => bail!("unknown --render '{s}' (known: gather, gouraud, flat)"),
     };
+    let gather = a.mode == "gather";
+    if a.shadow_rays == 0 || a.shadow_rays > 16 {
+        bail!("--shadow-rays must be between 1 and 16");
+    }
     if let Some(e) = a.exposure {
         if !(e.is_finite() && e > 0.0) {
             bail!("--exposure must be a positive number");
@@ -93,25 +110,43 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         Some(p) => Some(Camera::load_json(p)?),
         None => None,
     };
+    let view_list = match &a.views {
+        Some(p) => Some(Camera::load_views(p)?),
+        None => None,
+    };
     let (scene, load_s) = a.solve.load_scene()?;
-    let mut cam = file_camera.or(scene.camera).unwrap_or_else(|| {
-        let (lo, hi) = scene.bounds();
-        Camera::framing(lo, hi)
-    });
-    if let Some(v) = a.eye {
-        cam.position = v;
-    }
-    if let Some(v) = a.look_at {
-        cam.look_at = v;
-    }
-    if let Some(v) = a.up {
-        cam.up = v;
-    }
-    if let Some(f) = a.fov {
-        cam.vfov_deg = f;
-    }
-    cam.validate().map_err(|m| anyhow::anyhow!("camera: {m}"))?;
     let out_png = a.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.png", scene.name)));
+    // The views: one (file, flags, the scene's own camera, or a framing default) or a list.
+    let views: Vec<(String, Camera, PathBuf, Option<PathBuf>)> = match view_list {
+        None => {
+            let mut cam = file_camera.or(scene.camera).unwrap_or_else(|| {
+                let (lo, hi) = scene.bounds();
+                Camera::framing(lo, hi)
+            });
+            if let Some(v) = a.eye {
+                cam.position = v;
+            }
+            if let Some(v) = a.look_at {
+                cam.look_at = v;
+            }
+            if let Some(v) = a.up {
+                cam.up = v;
+            }
+            if let Some(f) = a.fov {
+                cam.vfov_deg = f;
+            }
+            cam.validate().map_err(|m| anyhow::anyhow!("camera: {m}"))?;
+            vec![("main".to_string(), cam, out_png.clone(), a.exr.clone())]
+        }
+        Some(list) => list
+            .into_iter()
+            .map(|(name, cam)| {
+                let png = suffixed(&out_png, &name);
+                let exr = a.exr.as_ref().map(|e| suffixed(e, &name));
+                (name, cam, png, exr)
+            })
+            .collect(),
+    };
 
     let progress = CliProgress::new(a.solve.quiet);
     let solved = solve_scene(scene, &settings, &progress)?;
@@ -130,22 +165,44 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     }
 
     let t = Instant::now();
-    let tracer = ElementTracer::new(&solved.mesh);
-    let opts = gouraud::Options { width: a.width, height: a.height, spp_axis: a.spp, shading };
-    // The image is drawn even after an interrupt: the solution so far is what we have.
-    let quiet = CliProgress::new(a.solve.quiet);
-    let img = solved.render(&cam, &opts, &tracer, &NeverStop(&quiet));
-    let render_s = t.elapsed().as_secs_f64();
-
+    let two_sided: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
+    let tracer = ElementTracer::new(&solved.mesh, &two_sided);
+    let indirect = if gather { Some(solved.indirect_irradiance().1) } else { None };
     let mut report = solved.report();
     report.timings.load = load_s;
-    report.timings.render = render_s;
-    write_atomic(&out_png, &output::png::encode(&img, a.exposure)?)?;
-    report.images.push(out_png.display().to_string());
-    if let Some(p) = &a.exr {
-        write_atomic(p, &output::exr::encode(&img)?)?;
-        report.images.push(p.display().to_string());
+    // Images are drawn even after an interrupt: the solution so far is what we have.
+    let quiet = CliProgress::new(a.solve.quiet);
+    for (name, cam, png_path, exr_path) in &views {
+        let tv = Instant::now();
+        let (img, rays) = match &indirect {
+            Some(hv) => {
+                let gopts = gather::Options {
+                    width: a.width,
+                    height: a.height,
+                    spp_axis: spp,
+                    shadow_axis: a.shadow_rays,
+                    seed: a.solve.seed,
+                };
+                solved.render_gather(cam, &gopts, &tracer, hv, &NeverStop(&quiet))
+            }
+            None => {
+                let opts = gouraud::Options { width: a.width, height: a.height, spp_axis: spp, shading };
+                let img = solved.render(cam, &opts, &tracer, &NeverStop(&quiet));
+                let rays = (a.width * a.height * spp * spp) as u64;
+                (img, rays)
+            }
+        };
+        let mut files = vec![png_path.display().to_string()];
+        write_atomic(png_path, &output::png::encode(&img, a.exposure)?)?;
+        if let Some(p) = exr_path {
+            write_atomic(p, &output::exr::encode(&img)?)?;
+            files.push(p.display().to_string());
+        }
+        report.rays_cast += rays;
+        report.images.extend(files.iter().cloned());
+        report.views.push(ViewReport { name: name.clone(), images: files, seconds: tv.elapsed().as_secs_f64(), rays });
     }
+    report.timings.render = t.elapsed().as_secs_f64();
     report.timings.total = t0.elapsed().as_secs_f64();
     if let Some(p) = &a.solve.report {
         write_atomic(p, serde_json::to_string_pretty(&report)?.as_bytes())?;
@@ -154,6 +211,16 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         eprintln!("wrote {} in {:.2} s", report.images.join(", "), report.timings.total);
     }
     Ok(exit_code(stats.stop))
+}
+
+/// `dir/stem.ext` → `dir/stem_name.ext`.
+fn suffixed(path: &std::path::Path, name: &str) -> PathBuf {
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let file = match path.extension() {
+        Some(ext) => format!("{stem}_{name}.{}", ext.to_string_lossy()),
+        None => format!("{stem}_{name}"),
+    };
+    path.with_file_name(file)
 }
 
 /// Forwards progress but never asks to stop (used for output after an interrupt).

@@ -6,9 +6,10 @@ use std::time::Instant;
 
 use crate::accel::SceneRays;
 use crate::form_factor;
-use crate::mesh::{self, Mesh};
+use crate::mesh::{self, Mesh, Receivers};
 use crate::reconstruct;
 use crate::render::gouraud::{self, ElementTracer};
+use crate::render::gather;
 use crate::render::{Image, PinholeCamera};
 use crate::report::{EnergyReport, ObjectReport, Report, Timings};
 use crate::scene::{Camera, Scene};
@@ -27,6 +28,8 @@ pub struct Settings {
     pub solver: Solver,
     /// Stopping rules.
     pub solve: solve::Options,
+    /// Refuse meshes with more elements than this (form factors cost grows as n²).
+    pub max_elements: u64,
 }
 
 impl Default for Settings {
@@ -36,9 +39,13 @@ impl Default for Settings {
             form_factors: form_factor::Options::default(),
             solver: Solver::Jacobi,
             solve: solve::Options::default(),
+            max_elements: DEFAULT_MAX_ELEMENTS,
         }
     }
 }
+
+/// Default cap on the element count.
+pub const DEFAULT_MAX_ELEMENTS: u64 = 200_000;
 
 /// A solved scene.
 pub struct Solved {
@@ -48,6 +55,8 @@ pub struct Solved {
     pub mesh: Mesh,
     /// Ray casting against the scene's polygons.
     pub rays: SceneRays,
+    /// Receiver points and open (uncovered) fraction of every element.
+    pub receivers: Receivers,
     /// The form-factor rows.
     pub transport: SparseRows,
     /// Form-factor statistics.
@@ -76,6 +85,24 @@ pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -
     let mut timings = Timings::default();
     let t = Instant::now();
     let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
+    let count = mesh::count_uniform(&scene, size);
+    if count > settings.max_elements {
+        // The smallest size that meets the cap, by bisection on the count.
+        let (mut lo, mut hi) = (size, scene.diagonal().max(size));
+        for _ in 0..60 {
+            let mid = (lo * hi).sqrt();
+            if mesh::count_uniform(&scene, mid) > settings.max_elements {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let many = if count == u64::MAX { "more than 10^19".to_string() } else { count.to_string() };
+        return Err(crate::Error::Invalid(format!(
+            "mesh size {size:.4e} would create {many} elements (limit {}); use --mesh-size {hi:.4e} or larger, or raise --max-elements",
+            settings.max_elements
+        )));
+    }
     let mesh = mesh::mesh_uniform(&scene, size);
     timings.mesh = t.elapsed().as_secs_f64();
 
@@ -84,12 +111,15 @@ pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -
     timings.bvh = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let (transport, ff_stats) = form_factor::compute(&scene, &mesh, &rays, &settings.form_factors, progress)?;
+    let receivers = Receivers::compute(&scene, &mesh, &rays);
+    let (transport, mut ff_stats) =
+        form_factor::compute(&scene, &mesh, &rays, &receivers, &settings.form_factors, progress)?;
+    ff_stats.rays += receivers.rays;
     timings.form_factors = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let (rho, emission) = element_materials(&scene, &mesh);
-    let area: Vec<f64> = mesh.elements.iter().map(|e| e.area).collect();
+    let area = receivers.open_areas(&mesh);
     let system = System { transport: &transport, reflectance: &rho, emission: &emission, area: &area };
     let solution = solve::solve(settings.solver, &system, &settings.solve, progress)?;
     timings.solve = t.elapsed().as_secs_f64();
@@ -97,13 +127,13 @@ pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -
     let t = Instant::now();
     let vertex_radiosity = reconstruct::vertex_radiosity(&scene, &mesh, &solution.display_radiosity());
     timings.reconstruct = t.elapsed().as_secs_f64();
-    Ok(Solved { scene, mesh, rays, transport, ff_stats, solution, vertex_radiosity, timings })
+    Ok(Solved { scene, mesh, rays, receivers, transport, ff_stats, solution, vertex_radiosity, timings })
 }
 
 impl Solved {
     /// Per-object area-averaged radiosity and radiance.
     pub fn objects(&self) -> Vec<ObjectReport> {
-        let means = reconstruct::object_means(&self.scene, &self.mesh, &self.solution.radiosity);
+        let means = reconstruct::object_means(&self.scene, &self.mesh, &self.solution.radiosity, &self.receivers.open_fraction);
         let mut counts = vec![0usize; self.scene.objects.len()];
         let mut mats: Vec<Vec<String>> = vec![Vec::new(); self.scene.objects.len()];
         for e in &self.mesh.elements {
@@ -121,13 +151,20 @@ impl Solved {
             .zip(means)
             .enumerate()
             .filter(|(k, _)| counts[*k] > 0)
-            .map(|(k, (o, (area, b)))| ObjectReport {
-                name: o.name.clone(),
-                area,
-                radiosity_rgb: b.to_array(),
-                radiance_rgb: (b / std::f64::consts::PI).to_array(),
-                elements: counts[k],
-                materials: mats[k].clone(),
+            .map(|(k, (o, (front, back)))| {
+                let pi = std::f64::consts::PI;
+                let has_back = back.area > 0.0;
+                let (area, b) = if front.area > 0.0 { (front.area, front.radiosity) } else { (back.area, back.radiosity) };
+                ObjectReport {
+                    name: o.name.clone(),
+                    area,
+                    radiosity_rgb: b.to_array(),
+                    radiance_rgb: (b / pi).to_array(),
+                    back_radiosity_rgb: (has_back && front.area > 0.0).then(|| back.radiosity.to_array()),
+                    back_radiance_rgb: (has_back && front.area > 0.0).then(|| (back.radiosity / pi).to_array()),
+                    elements: counts[k],
+                    materials: mats[k].clone(),
+                }
             })
             .collect()
     }
@@ -142,12 +179,14 @@ impl Solved {
         let mut absorbed = Rgb::ZERO;
         let mut leaving = Rgb::ZERO;
         let mut arriving = Rgb::ZERO;
-        for (i, e) in self.mesh.elements.iter().enumerate() {
-            emitted += emission[i] * e.area;
+        let area = self.receivers.open_areas(&self.mesh);
+        for i in 0..self.mesh.len() {
+            let a = area[i];
+            emitted += emission[i] * a;
             // Irradiance H_i = Σ_j F_ij B_j (gather form); absorbed = A (1−ρ) H.
-            absorbed += (Rgb::ONE - rho[i]) * fb[i] * e.area;
-            leaving += b[i] * e.area;
-            arriving += fb[i] * e.area;
+            absorbed += (Rgb::ONE - rho[i]) * fb[i] * a;
+            leaving += b[i] * a;
+            arriving += fb[i] * a;
         }
         // Power that leaves surfaces but never arrives anywhere escapes through openings.
         let escaped = leaving - arriving;
@@ -158,6 +197,33 @@ impl Solved {
             escaped: escaped.to_array(),
             unaccounted: unaccounted.to_array(),
         }
+    }
+
+    /// Indirect irradiance per element, `(F·(B − E))_i` — light that has bounced at least
+    /// once — and its per-vertex reconstruction (for the final gather).
+    pub fn indirect_irradiance(&self) -> (Vec<Rgb>, Vec<Rgb>) {
+        let (_, emission) = element_materials(&self.scene, &self.mesh);
+        let b = self.solution.display_radiosity();
+        let reflected: Vec<Rgb> = b.iter().zip(&emission).map(|(b, e)| (*b - *e).max(Rgb::ZERO)).collect();
+        let mut h = vec![Rgb::ZERO; b.len()];
+        self.transport.gather(&reflected, &mut h);
+        let hv = reconstruct::vertex_radiosity(&self.scene, &self.mesh, &h);
+        (h, hv)
+    }
+
+    /// Renders one view by final gathering (direct light per pixel, indirect from the
+    /// solution); `indirect_vertex` comes from [`Solved::indirect_irradiance`]. Returns the
+    /// image and the rays cast.
+    pub fn render_gather(
+        &self,
+        camera: &Camera,
+        opts: &gather::Options,
+        tracer: &ElementTracer,
+        indirect_vertex: &[Rgb],
+        progress: &dyn Progress,
+    ) -> (Image, u64) {
+        let cam = PinholeCamera::new(camera, opts.width, opts.height);
+        gather::render(&self.scene, &self.mesh, &self.rays, tracer, indirect_vertex, &cam, opts, progress)
     }
 
     /// Renders one view with Gouraud (or flat) shading.
@@ -185,6 +251,7 @@ impl Solved {
             timings: self.timings.clone(),
             objects: self.objects(),
             images: Vec::new(),
+            views: Vec::new(),
             warnings: self.scene.warnings.iter().map(|w| w.to_string()).collect(),
         }
     }

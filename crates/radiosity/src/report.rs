@@ -10,12 +10,19 @@ use crate::solve::SolveStats;
 pub struct ObjectReport {
     /// Object name (OBJ `o`/`g`, glTF node/mesh; `#k` for repeated names).
     pub name: String,
-    /// Area in scene units².
+    /// Area in scene units² (one side).
     pub area: f64,
     /// Area-averaged radiosity B (exitance), RGB.
     pub radiosity_rgb: [f64; 3],
     /// Area-averaged outgoing radiance L = B/π, RGB.
     pub radiance_rgb: [f64; 3],
+    /// Two-sided objects: the back side's mean radiosity (the fields above are the front
+    /// side, the input winding).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub back_radiosity_rgb: Option<[f64; 3]>,
+    /// Two-sided objects: the back side's mean radiance.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub back_radiance_rgb: Option<[f64; 3]>,
     /// Number of elements.
     pub elements: usize,
     /// Material names used.
@@ -56,6 +63,19 @@ pub struct EnergyReport {
     pub unaccounted: [f64; 3],
 }
 
+/// One rendered view.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ViewReport {
+    /// View name.
+    pub name: String,
+    /// Files written for it.
+    pub images: Vec<String>,
+    /// Seconds to render it (not counting the shared solve).
+    pub seconds: f64,
+    /// Rays cast for it.
+    pub rays: u64,
+}
+
 /// The whole report.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Report {
@@ -87,6 +107,8 @@ pub struct Report {
     pub objects: Vec<ObjectReport>,
     /// Images written.
     pub images: Vec<String>,
+    /// Views rendered from this one solve, with their own cost.
+    pub views: Vec<ViewReport>,
     /// Warnings.
     pub warnings: Vec<String>,
 }

@@ -24,7 +24,7 @@ use crate::accel::SceneRays;
 use crate::form_factor::diagnostics::{Diagnostics, RowDiagnostics};
 use crate::form_factor::enclosure::{self, EnclosureReport};
 use crate::form_factor::{self, Stats};
-use crate::mesh::{self, Mesh};
+use crate::mesh::{self, Mesh, Receivers};
 use crate::scene::Scene;
 use crate::transport::DenseMatrix;
 use crate::{Error, Progress, Result};
@@ -90,6 +90,9 @@ pub struct Job {
     scene: Scene,
     mesh: Mesh,
     rays: SceneRays,
+    /// Every receiver point open: a view factor counts the whole element, and parts that
+    /// see nothing (covered by a box) count as zero.
+    receivers: Receivers,
     settings: Settings,
     /// Every group (object side or element), obstructions included.
     groups: Groups,
@@ -149,12 +152,13 @@ impl Job {
         let polygon_rows = settings.per == Per::Object && method.is_area_to_area() && size == 0.0;
         let mesh = mesh::mesh_uniform(&scene, size);
         let rays = SceneRays::new(&scene.polygons);
+        let receivers = Receivers::all_open(&mesh);
         let groups = Groups::new(&scene, &mesh, settings.per);
         let output: Vec<usize> = (0..groups.names.len()).filter(|&g| !groups.obstruction[g]).collect();
         if output.is_empty() {
             return Err(Error::Invalid("the scene has no surfaces to compute view factors for".into()));
         }
-        Ok(Job { scene, mesh, rays, settings, groups, output, polygon_rows })
+        Ok(Job { scene, mesh, rays, receivers, settings, groups, output, polygon_rows })
     }
 
     /// The scene.
@@ -253,6 +257,7 @@ impl Job {
                 &self.scene,
                 &self.mesh,
                 &self.rays,
+                &self.receivers,
                 &self.settings.form_factors,
                 Some(&rows),
                 progress,
@@ -333,6 +338,7 @@ impl Job {
             &self.scene,
             &self.mesh,
             &self.rays,
+            &self.receivers,
             &self.settings.form_factors,
             Some(&rows),
             progress,

@@ -1,5 +1,5 @@
 //! Not a test: prints every method's error on every reference case (run with --ignored).
-mod common;
+mod vf_common;
 
 use radiosity::form_factor::{Method, Options};
 use radiosity::view_factors::{compute, Per, Settings};
@@ -16,11 +16,11 @@ fn survey() {
     for m in methods {
         let mut worst: f64 = 0.0;
         let t = std::time::Instant::now();
-        for c in common::cases().into_iter().filter(|c| std::env::var("SURVEY_ONLY").map_or(true, |o| c.label.contains(&o))) {
+        for c in vf_common::cases().into_iter().filter(|c| std::env::var("SURVEY_ONLY").map_or(true, |o| c.label.contains(&o))) {
             let exact = c.kind.exact();
             let st = Settings {
                 per: Per::Object,
-                mesh_size: if let common::Kind::Disks { r1, r2, .. } = c.kind { Some(std::env::var("SURVEY_DISK_K").map_or(0.0, |k| 2.0 * r1.max(r2) / k.parse::<f64>().unwrap())) } else { size.map(|s| s * c.kind.scene().diagonal()) },
+                mesh_size: if let vf_common::Kind::Disks { r1, r2, .. } = c.kind { Some(std::env::var("SURVEY_DISK_K").map_or(0.0, |k| 2.0 * r1.max(r2) / k.parse::<f64>().unwrap())) } else { size.map(|s| s * c.kind.scene().diagonal()) },
                 form_factors: Options { method: m, hemicube_resolution: std::env::var("SURVEY_RES").map_or(radiosity::form_factor::hemicube::DEFAULT_RESOLUTION, |r| r.parse().unwrap()), ..Default::default() },
                 enclosure: false,
             };

@@ -14,9 +14,9 @@
 //! slowest, diagonal / 20), disks the 256-gon cut into 3 rings of 256 elements. The
 //! area-to-area methods (analytic, adaptive) use each polygon whole.
 
-mod common;
+mod vf_common;
 
-use common::{cases, Case, Kind};
+use vf_common::{cases, Case, Kind};
 use radiosity::form_factor::{Method, Options};
 use radiosity::scene::Scene;
 use radiosity::view_factors::{compute, Job, Per, Settings, ViewFactors};
@@ -112,7 +112,7 @@ fn unit_cube_rows_sum_to_one_for_every_method() {
         (Method::PointSampled, 5e-3),
         (Method::Hemicube, 2e-2),
     ] {
-        let cube = common::unit_cube();
+        let cube = vf_common::unit_cube();
         // Hemicube and Monte Carlo on a diag/20 mesh (faster); point-sampled at its default.
         let coarse = matches!(method, Method::Hemicube | Method::MonteCarlo);
         let size = if coarse { Some(cube.diagonal() / 20.0) } else { None };
@@ -140,7 +140,7 @@ fn unit_cube_rows_sum_to_one_for_every_method() {
 /// reference (4 M rays per face, standard error ≤ 2.5e-4), floor row included.
 #[test]
 fn cornell_adaptive_matches_the_reference_to_1e3() {
-    let text = std::fs::read_to_string(format!("{}/cornell_view_factors_monte_carlo.json", common::DATA)).unwrap();
+    let text = std::fs::read_to_string(format!("{}/cornell_view_factors_monte_carlo.json", vf_common::DATA)).unwrap();
     let r: serde_json::Value = serde_json::from_str(&text).unwrap();
     let names: Vec<&str> = r["faces"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect();
     let scene = Scene::from_desc(radiosity::scene::builtin::cornell()).unwrap();
@@ -192,7 +192,7 @@ fn closed_cornell_box_rows_close() {
 
 #[test]
 fn enclosure_correction_makes_box345_reciprocal_and_closed() {
-    let (desc, ctrl) = radiosity::scene::vs3::read_vs3(std::path::Path::new(&format!("{}/box345.vs3", common::DATA))).unwrap();
+    let (desc, ctrl) = radiosity::scene::vs3::read_vs3(std::path::Path::new(&format!("{}/box345.vs3", vf_common::DATA))).unwrap();
     assert!(ctrl.enclosure, "box345.vs3 asks for encl=1");
     let scene = Scene::from_desc(desc).unwrap();
     let settings = Settings {
@@ -214,7 +214,7 @@ fn enclosure_correction_makes_box345_reciprocal_and_closed() {
 
 #[test]
 fn view3d_parallel_planes() {
-    let path = format!("{}/ParallelPlanes.vs3", common::DATA);
+    let path = format!("{}/ParallelPlanes.vs3", vf_common::DATA);
     let scene = radiosity::scene::load_scene(&path).unwrap();
     let vf = run(scene, Method::Adaptive, None, |_| {});
     assert_eq!(vf.names, ["bottom", "top"]);
@@ -298,7 +298,7 @@ fn a_matrix_too_large_for_memory_is_a_clear_error() {
 fn analytic_warns_that_it_ignores_occlusion() {
     let cornell = Scene::from_desc(radiosity::scene::builtin::cornell()).unwrap();
     assert!(!run(cornell, Method::Analytic, None, |_| {}).stats.warnings.is_empty());
-    assert!(run(common::unit_cube(), Method::Analytic, None, |_| {}).stats.warnings.is_empty());
+    assert!(run(vf_common::unit_cube(), Method::Analytic, None, |_| {}).stats.warnings.is_empty());
 }
 
 /// Every method drives the radiosity pipeline: the furnace (closed, uniform) must give

@@ -12,6 +12,10 @@ use crate::scene::Polygon;
 pub struct SceneRays {
     bvh: Bvh,
     tri_polygon: Vec<u32>,
+    /// Per polygon: one side of a two-sided pair (its back face is hidden by its twin).
+    two_sided: Vec<bool>,
+    /// Per polygon: unit normal, f32.
+    normal: Vec<Vec3>,
 }
 
 /// Relative start/end offset of a visibility segment, as a fraction of its length; keeps
@@ -30,7 +34,12 @@ impl SceneRays {
                 tri_polygon.push(pi as u32);
             }
         }
-        SceneRays { bvh: Bvh::build(&tris), tri_polygon }
+        SceneRays {
+            bvh: Bvh::build(&tris),
+            tri_polygon,
+            two_sided: polygons.iter().map(|p| p.two_sided).collect(),
+            normal: polygons.iter().map(|p| p.normal.as_vec3()).collect(),
+        }
     }
 
     /// The underlying hierarchy (triangle ids index [`SceneRays::polygon_of`]).
@@ -56,6 +65,19 @@ impl SceneRays {
             let p = self.tri_polygon[prim as usize];
             p == pa || p == pb
         })
+    }
+
+    /// Closest polygon whose visible face is hit by a ray from `origin` (optionally leaving
+    /// polygon `from`): the back face of one side of a two-sided pair is skipped, since its
+    /// coincident twin faces the ray. Returns the hit and the polygon index.
+    #[inline]
+    pub fn closest_facing(&self, origin: Vec3, dir: Vec3, tmax: f32, from: Option<u32>) -> Option<(Hit, u32)> {
+        let ray = Ray::new(origin, dir, 0.0, tmax);
+        let h = self.bvh.intersect_filtered(&ray, |prim| {
+            let p = self.tri_polygon[prim as usize];
+            Some(p) == from || (self.two_sided[p as usize] && self.normal[p as usize].dot(dir) > 0.0)
+        })?;
+        Some((h, self.tri_polygon[h.prim as usize]))
     }
 
     /// Closest polygon hit by a ray from `origin` (optionally leaving polygon `from`),

@@ -632,7 +632,8 @@ mod tests {
         let rays = SceneRays::new(&scene.polygons);
         let mesh = Mesh::default();
         let opts = super::super::Options::default();
-        let ctx = Context::new(&scene, &mesh, &rays, &opts);
+        let receivers = crate::mesh::Receivers::default();
+        let ctx = Context::new(&scene, &mesh, &rays, &receivers, &opts);
         let rows = Rows::new(&ctx);
         let find = |name: &str| scene.polygons.iter().position(|p| scene.objects[p.object as usize].name == name).unwrap() as u32;
         let (pa, pb) = (find("back_wall"), find("short_1"));

@@ -168,9 +168,13 @@ impl RowSource for Rows<'_> {
             patches_in_front(ctx, ei.patch, &mut s.patches);
         }
         let res = self.table.res;
+        // The hemicube stands on the element's open representative point (its centroid
+        // unless that lies inside closed geometry); none: the element receives nothing.
+        let Some(&c) = ctx.receivers.points(i, 1).first() else {
+            return 0;
+        };
         s.ids.fill(EMPTY);
         s.inv_depth.fill(0.0);
-        let c = ei.centroid;
         let (t, b) = crate::sampling::basis(ei.normal);
         let n = ei.normal;
         let local = |p: DVec3| {

@@ -29,6 +29,22 @@ pub fn point_to_polygon(x: DVec3, n: DVec3, poly: &[DVec3], poly_normal: DVec3) 
     point_to_polygon_unsided(x, n, poly)
 }
 
+/// The far-field (point-to-point) approximation of the factor from `dA_x` (normal `n`) to a
+/// small element of area `area` at `y` (normal `ny`): `cosθ_x cosθ_y A / (π r²)`. Its
+/// relative error is O((size/r)²); callers renormalise sums of it against
+/// [`point_to_polygon`] on the whole patch.
+#[inline]
+pub fn point_to_point(x: DVec3, n: DVec3, y: DVec3, ny: DVec3, area: f64) -> f64 {
+    let d = y - x;
+    let r2 = d.length_squared();
+    let cx = n.dot(d);
+    let cy = -ny.dot(d);
+    if cx <= 0.0 || cy <= 0.0 || r2 <= 0.0 {
+        return 0.0;
+    }
+    cx * cy * area / (std::f64::consts::PI * r2 * r2)
+}
+
 /// As [`point_to_polygon`] without the front-side test.
 pub fn point_to_polygon_unsided(x: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
     if poly.len() < MAXV {

@@ -47,7 +47,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::accel::SceneRays;
-use crate::mesh::Mesh;
+use crate::mesh::coverage::MAX_K;
+use crate::mesh::{Mesh, Receivers};
 use crate::scene::Scene;
 use crate::transport::SparseRows;
 use crate::{Error, Progress, Result};
@@ -111,8 +112,8 @@ pub struct Options {
     /// Point-sampled: visibility rays per receiver point, as `n × n` stratified points on
     /// the source.
     pub visibility_samples: usize,
-    /// Point-sampled: largest number of receiver points per side (`n × n`), used for close
-    /// pairs.
+    /// Point-sampled: largest number of receiver points per side (`n × n`, at most
+    /// [`crate::mesh::coverage::MAX_K`]), used for close pairs.
     pub max_receiver_samples: usize,
     /// Hemicube: pixels along the top face (the four side faces are `res × res/2`).
     pub hemicube_resolution: usize,
@@ -135,7 +136,7 @@ impl Default for Options {
         Options {
             method: Method::PointSampled,
             seed: 0,
-            visibility_samples: 2,
+            visibility_samples: 1,
             max_receiver_samples: 3,
             hemicube_resolution: hemicube::DEFAULT_RESOLUTION,
             mc_rays: monte_carlo::DEFAULT_RAYS,
@@ -154,8 +155,8 @@ impl Options {
         if self.visibility_samples == 0 || self.visibility_samples > 64 {
             return bad(format!("visibility samples must be between 1 and 64, got {}", self.visibility_samples));
         }
-        if self.max_receiver_samples == 0 || self.max_receiver_samples > 64 {
-            return bad(format!("receiver samples must be between 1 and 64, got {}", self.max_receiver_samples));
+        if self.max_receiver_samples == 0 || self.max_receiver_samples > MAX_K {
+            return bad(format!("receiver samples must be between 1 and {MAX_K}, got {}", self.max_receiver_samples));
         }
         if self.hemicube_resolution < 2 || self.hemicube_resolution > 8192 || self.hemicube_resolution % 2 != 0 {
             return bad(format!("hemicube resolution must be even and between 2 and 8192, got {}", self.hemicube_resolution));
@@ -191,17 +192,27 @@ pub struct Stats {
 
 /// Computes the form-factor rows of all elements of `mesh`, for the radiosity solvers
 /// (f32 sparse rows; entries ≤ 0 are dropped).
+///
+/// The solvers use the *open* part of each element ([`Receivers`]: points inside closed
+/// geometry, such as floor under a box, are excluded). Point-sampled gathers at open points
+/// and the hemicube stands on the element's open representative point; Monte Carlo and
+/// adaptive integrate over the whole element, where covered parts see nothing, so their
+/// rows are divided by the element's open fraction to give the factor of its open part.
 pub fn compute(
     scene: &Scene,
     mesh: &Mesh,
     rays: &SceneRays,
+    receivers: &Receivers,
     opts: &Options,
     progress: &dyn Progress,
 ) -> Result<(SparseRows, Stats)> {
     check_row_memory(scene, mesh, opts)?;
     let mut rows: Vec<Vec<(u32, f32)>> = Vec::with_capacity(mesh.len());
-    let stats = for_each_row(scene, mesh, rays, opts, None, progress, &mut |_, row| {
-        rows.push(row.iter().filter(|e| e.1 > 0.0).map(|&(j, f)| (j, f as f32)).collect());
+    let whole_element = matches!(opts.method, Method::MonteCarlo | Method::Adaptive);
+    let stats = for_each_row(scene, mesh, rays, receivers, opts, None, progress, &mut |i, row| {
+        let open = receivers.open_fraction.get(i).copied().unwrap_or(1.0);
+        let scale = if whole_element && open > 0.0 { 1.0 / open } else { 1.0 };
+        rows.push(row.iter().filter(|e| e.1 > 0.0).map(|&(j, f)| (j, (f * scale) as f32)).collect());
         Ok(())
     })?;
     let rows = SparseRows::from_rows(rows);
@@ -213,10 +224,12 @@ pub fn compute(
 /// hands each to `sink` as `(i, entries)`, in the order of `which`. Entries are `(j, F_ij)`
 /// with `F_ij ≠ 0`, columns ascending, in f64. Rows are computed in parallel blocks but
 /// delivered in order, so a caller can stream them to a file.
+#[allow(clippy::too_many_arguments)]
 pub fn for_each_row(
     scene: &Scene,
     mesh: &Mesh,
     rays: &SceneRays,
+    receivers: &Receivers,
     opts: &Options,
     which: Option<&[u32]>,
     progress: &dyn Progress,
@@ -233,7 +246,7 @@ pub fn for_each_row(
             &all
         }
     };
-    let ctx = Context::new(scene, mesh, rays, opts);
+    let ctx = Context::new(scene, mesh, rays, receivers, opts);
     let (nonzeros, nrays) = match opts.method {
         Method::Hemicube => drive(&hemicube::Rows::new(&ctx), which, progress, sink)?,
         Method::Analytic => {
@@ -278,7 +291,8 @@ pub fn for_each_polygon_row(
         }
     };
     let mesh = Mesh::default();
-    let ctx = Context::new(scene, &mesh, rays, opts);
+    let receivers = Receivers::default();
+    let ctx = Context::new(scene, &mesh, rays, &receivers, opts);
     let mut warnings = Vec::new();
     let (nonzeros, nrays) = if opts.method == Method::Analytic {
         warn_occlusion(scene, progress, &mut warnings);
@@ -305,6 +319,8 @@ pub(crate) struct Context<'a> {
     pub scene: &'a Scene,
     pub mesh: &'a Mesh,
     pub rays: &'a SceneRays,
+    /// Open receiver points of the elements (point-sampled, hemicube).
+    pub receivers: &'a Receivers,
     pub opts: &'a Options,
     /// Per patch: (a point of its plane, unit normal).
     pub planes: Vec<(DVec3, DVec3)>,
@@ -313,9 +329,9 @@ pub(crate) struct Context<'a> {
 }
 
 impl<'a> Context<'a> {
-    fn new(scene: &'a Scene, mesh: &'a Mesh, rays: &'a SceneRays, opts: &'a Options) -> Self {
+    fn new(scene: &'a Scene, mesh: &'a Mesh, rays: &'a SceneRays, receivers: &'a Receivers, opts: &'a Options) -> Self {
         let planes = scene.polygons.iter().map(|p| (p.vertices[0], p.normal)).collect();
-        Context { scene, mesh, rays, opts, planes, eps: 1e-9 * scene.diagonal() }
+        Context { scene, mesh, rays, receivers, opts, planes, eps: 1e-9 * scene.diagonal() }
     }
 
     /// Patches that can exchange light with patch `pi` at all: some vertex in front of
@@ -436,7 +452,8 @@ fn check_row_memory(scene: &Scene, mesh: &Mesh, opts: &Options) -> Result<()> {
         return Ok(());
     }
     let rays = SceneRays::default();
-    let ctx = Context::new(scene, mesh, &rays, opts);
+    let receivers = Receivers::default();
+    let ctx = Context::new(scene, mesh, &rays, &receivers, opts);
     let mut list = Vec::new();
     let mut entries = 0u64;
     for (p, pe) in mesh.patches.iter().enumerate() {

@@ -5,17 +5,26 @@
 //! F_ij ≈ 1/m · Σ_{s=1..m} F(dA_{x_s} → A_j) · V̂(x_s, A_j)
 //! ```
 //!
-//! `x_s` are `m = k×k` stratified points on the receiver `i` (k grows as the pair gets
-//! closer: 1 when the distance exceeds four element sizes, up to `max_receiver_samples`);
+//! `x_s` are the open points of a fixed `k×k` grid on the receiver `i` (k grows as the
+//! pair gets closer: 1 when the distance exceeds four element sizes, up to
+//! `max_receiver_samples`; points inside closed geometry are excluded, see
+//! [`crate::mesh::coverage`]);
 //! `F(dA → A_j)` is the exact contour integral ([`super::kernel`]); `V̂` is the fraction of
 //! `visibility_samples²` rays from `x_s` to stratified points of `j` that reach it. Rows of
 //! a closed, unoccluded enclosure sum to one exactly (up to rounding), which is what the
 //! furnace test needs. Each row draws from its own random stream (seed, row), so results
 //! do not depend on the thread count.
 
-use super::kernel::point_to_polygon;
+use glam::DVec3;
+
+use super::kernel::{point_to_point, point_to_polygon};
 use super::{Context, RowSource};
-use crate::sampling::{rng_for, stratified};
+use crate::mesh::coverage::MAX_K;
+use crate::sampling::{rng_for, stratified, Rng};
+
+/// Patches with at least this many elements get the far-field kernel with patch
+/// renormalisation.
+const BIG_PATCH: u32 = 8;
 
 pub(crate) struct Rows<'a> {
     ctx: &'a Context<'a>,
@@ -27,8 +36,9 @@ impl<'a> Rows<'a> {
     }
 }
 
-/// Receiver points, visibility points, the patch the list is for, its facing patches.
-pub(crate) type Scratch = (Vec<(f64, f64)>, Vec<(f64, f64)>, u32, Vec<u32>);
+/// Visibility points, the row with far flags, the patch the list is for, its facing
+/// patches.
+pub(crate) type Scratch = (Vec<(f64, f64)>, Vec<(u32, f64, bool)>, u32, Vec<u32>);
 
 impl RowSource for Rows<'_> {
     type Scratch = Scratch;
@@ -37,20 +47,65 @@ impl RowSource for Rows<'_> {
         (Vec::new(), Vec::new(), u32::MAX, Vec::new())
     }
 
-    fn row(&self, i: usize, s: &mut Scratch, row: &mut Vec<(u32, f64)>) -> u64 {
-        let (recv_pts, vis_pts, cached_patch, patch_list) = s;
-        let (mesh, rays, opts, eps) = (self.ctx.mesh, self.ctx.rays, self.ctx.opts, self.ctx.eps);
+    fn row(&self, i: usize, s: &mut Scratch, out: &mut Vec<(u32, f64)>) -> u64 {
+        let (vis_pts, row, cached_patch, patch_list) = s;
+        let ctx = self.ctx;
+        let (scene, mesh, rays, receivers, opts, eps) = (ctx.scene, ctx.mesh, ctx.rays, ctx.receivers, ctx.opts, ctx.eps);
         let ei = &mesh.elements[i];
         let pi = ei.patch;
         if *cached_patch != pi {
             *cached_patch = pi;
-            self.ctx.facing_patches(pi, patch_list);
+            ctx.facing_patches(pi, patch_list);
         }
         let mut rng = rng_for(opts.seed, i as u64);
         let size_i = ei.area.sqrt();
         let mut nrays = 0u64;
+        row.clear();
+        let Some(&c1) = receivers.points(i, 1).first() else {
+            return 0; // entirely covered: receives nothing
+        };
+        let kv = opts.visibility_samples.max(1);
+        // Visible fraction of element j seen from x (kv² stratified rays).
+        let mut visibility = |x: DVec3, j: u32, q: u32, rng: &mut Rng, nrays: &mut u64| {
+            let ej = &mesh.elements[j as usize];
+            stratified(kv, rng, vis_pts);
+            let mut seen = 0u32;
+            let mut tried = 0u32;
+            for &(a, b) in vis_pts.iter() {
+                let y = ej.point(&mesh.positions, a, b);
+                if ei.normal.dot(y - x) <= 0.0 {
+                    continue;
+                }
+                tried += 1;
+                if rays.visible(x, pi, y, q) {
+                    seen += 1;
+                }
+            }
+            *nrays += tried as u64;
+            if tried == 0 {
+                1.0
+            } else {
+                seen as f64 / tried as f64
+            }
+        };
+        // Near pairs get k×k receiver points; far pairs the single point c1. The
+        // extra exchange D that the finer sets find with near neighbours is taken
+        // from the far field (scale α), so each row sums exactly to the unoccluded
+        // total seen from c1 — one in a closed room (the furnace test).
+        let mut near_excess = 0.0;
+        let mut far_sum = 0.0;
         for &q in patch_list.iter() {
             let pe = mesh.patches[q as usize];
+            let poly_q = &scene.polygons[q as usize];
+            // Large patches: far elements use the point-to-point kernel and are then
+            // scaled so that, with the exact near ones, they add up to the exact
+            // factor to the whole patch (contour integral) — cheap and still exact in
+            // total, which keeps closed rooms closed.
+            let big = pe.count >= BIG_PATCH;
+            let exact_q = if big { point_to_polygon(c1, ei.normal, &poly_q.vertices, poly_q.normal) } else { 0.0 };
+            let far_start = row.len();
+            let mut approx_far_q = 0.0;
+            let mut near_f1_q = 0.0;
             for j in pe.first..pe.first + pe.count {
                 let ej = &mesh.elements[j as usize];
                 let (cj, nv) = ej.corners(&mesh.positions);
@@ -70,38 +125,63 @@ impl RowSource for Rows<'_> {
                     opts.max_receiver_samples.max(1)
                 }
                 .min(opts.max_receiver_samples.max(1));
-                stratified(k, &mut rng, recv_pts);
-                let kv = opts.visibility_samples.max(1);
+                // A partly covered element may have a single open point at level k:
+                // go finer rather than fall back to the representative point.
+                let mut k = k;
+                while k > 1 && k < MAX_K && receivers.points(i, k).len() <= 1 {
+                    k += 1;
+                }
+                let recv_pts = receivers.points(i, k);
+                if k == 1 || recv_pts.len() <= 1 {
+                    let f1 = if big {
+                        point_to_point(c1, ei.normal, ej.centroid, ej.normal, ej.area)
+                    } else {
+                        point_to_polygon(c1, ei.normal, cj, ej.normal)
+                    };
+                    if f1 > 0.0 {
+                        approx_far_q += f1;
+                        let v = visibility(c1, j, q, &mut rng, &mut nrays);
+                        row.push((j, f1 * v, true));
+                    }
+                    continue;
+                }
+                let f1 = point_to_polygon(c1, ei.normal, cj, ej.normal);
+                near_f1_q += f1;
                 let mut sum = 0.0;
-                for &(u, v) in recv_pts.iter() {
-                    let x = ei.point(&mesh.positions, u, v);
+                let mut unocc = 0.0;
+                for &x in recv_pts.iter() {
                     let f = point_to_polygon(x, ei.normal, cj, ej.normal);
                     if f <= 0.0 {
                         continue;
                     }
-                    stratified(kv, &mut rng, vis_pts);
-                    let mut seen = 0u32;
-                    let mut tried = 0u32;
-                    for &(a, b) in vis_pts.iter() {
-                        let y = ej.point(&mesh.positions, a, b);
-                        if ei.normal.dot(y - x) <= 0.0 {
-                            continue;
-                        }
-                        tried += 1;
-                        if rays.visible(x, pi, y, q) {
-                            seen += 1;
-                        }
-                    }
-                    nrays += tried as u64;
-                    let vis = if tried == 0 { 1.0 } else { seen as f64 / tried as f64 };
-                    sum += f * vis;
+                    unocc += f;
+                    sum += f * visibility(x, j, q, &mut rng, &mut nrays);
                 }
-                let fij = sum / recv_pts.len() as f64;
-                if fij > 0.0 {
-                    row.push((j, fij));
+                let m = recv_pts.len() as f64;
+                near_excess += unocc / m - f1;
+                if sum > 0.0 {
+                    row.push((j, sum / m, false));
                 }
             }
+            if big && approx_far_q > 0.0 {
+                let target = (exact_q - near_f1_q).max(0.0);
+                let scale = target / approx_far_q;
+                for e in row[far_start..].iter_mut().filter(|e| e.2) {
+                    e.1 *= scale;
+                }
+                far_sum += target;
+            } else {
+                far_sum += approx_far_q;
+            }
         }
+        let mut alpha = if far_sum > 0.0 { (1.0 - near_excess / far_sum).clamp(0.5, 1.5) } else { 1.0 };
+        // With occlusion the correction is estimated from unoccluded values; never let
+        // it push a row above one (no point sees more than its hemisphere).
+        let (near_vis, far_vis) = row.iter().fold((0.0, 0.0), |(n, f), &(_, v, far)| if far { (n, f + v) } else { (n + v, f) });
+        if near_vis + alpha * far_vis > 1.0 && far_vis > 0.0 {
+            alpha = ((1.0 - near_vis) / far_vis).max(0.0);
+        }
+        out.extend(row.iter().map(|&(j, f, far)| (j, if far { f * alpha } else { f })).filter(|e| e.1 > 0.0));
         nrays
     }
 }

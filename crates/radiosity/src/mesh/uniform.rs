@@ -7,6 +7,31 @@ use glam::DVec3;
 use super::{Element, Mesh, PatchElements, NO_VERTEX};
 use crate::scene::{polygon_centroid, Scene};
 
+/// Number of elements [`mesh_uniform`] would create (without creating them), saturating.
+pub fn count_uniform(scene: &Scene, size: f64) -> u64 {
+    let size = if size.is_finite() && size > 0.0 { size } else { f64::INFINITY };
+    let steps = |len: f64| -> u64 { ((len / size).ceil()).clamp(1.0, 1e9) as u64 };
+    let mut total: u64 = 0;
+    for poly in &scene.polygons {
+        let v = &poly.vertices;
+        let n = if v.len() == 4 {
+            let nu = steps((v[1] - v[0]).length().max((v[2] - v[3]).length()));
+            let nv = steps((v[3] - v[0]).length().max((v[2] - v[1]).length()));
+            nu.saturating_mul(nv)
+        } else {
+            let mut longest: f64 = 0.0;
+            for k in 1..v.len() - 1 {
+                let (a, b, c) = (v[0], v[k], v[k + 1]);
+                longest = longest.max((b - a).length()).max((c - b).length()).max((a - c).length());
+            }
+            let k = steps(longest);
+            k.saturating_mul(k).saturating_mul(v.len() as u64 - 2)
+        };
+        total = total.saturating_add(n);
+    }
+    total
+}
+
 /// Subdivides every polygon of `scene` into elements no larger than `size` (scene units)
 /// along any edge. `size <= 0` or non-finite leaves each polygon whole (one element per
 /// triangle/quad, fans for larger polygons).

@@ -45,6 +45,16 @@ impl PinholeCamera {
         self.forward + self.right * sx + self.up * sy
     }
 
+    /// The camera frame (right, up, forward), orthonormal.
+    pub fn frame(&self) -> (DVec3, DVec3, DVec3) {
+        (self.right, self.up, self.forward)
+    }
+
+    /// Scale factors from camera-space slopes (x/z, y/z) to [-1, 1] screen coordinates.
+    pub fn screen_scale(&self) -> (f64, f64) {
+        (1.0 / (self.tan_half * self.aspect), 1.0 / self.tan_half)
+    }
+
     /// Projects a world point to image coordinates (pixels), if it is in front.
     pub fn project(&self, p: DVec3) -> Option<(f64, f64)> {
         let d = p - self.eye;

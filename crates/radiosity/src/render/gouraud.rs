@@ -40,20 +40,33 @@ pub struct Options {
 pub struct ElementTracer {
     bvh: Bvh,
     owner: Vec<u32>,
+    /// Per element: (normal, one side of a two-sided pair).
+    facing: Vec<(glam::Vec3, bool)>,
 }
 
 impl ElementTracer {
-    /// Builds the BVH over the mesh's element triangles.
-    pub fn new(mesh: &Mesh) -> Self {
+    /// Builds the BVH over the mesh's element triangles. `two_sided_patch[p]` marks patches
+    /// that are one side of a two-sided pair (see [`crate::scene::Polygon::two_sided`]).
+    pub fn new(mesh: &Mesh, two_sided_patch: &[bool]) -> Self {
         let (tris, owner) = mesh.triangles();
-        ElementTracer { bvh: Bvh::build(&tris), owner }
+        let facing = mesh
+            .elements
+            .iter()
+            .map(|e| (e.normal.as_vec3(), two_sided_patch.get(e.patch as usize).copied().unwrap_or(false)))
+            .collect();
+        ElementTracer { bvh: Bvh::build(&tris), owner, facing }
     }
 
-    /// The element hit first by the ray and the hit point, if any.
+    /// The element hit first by the ray and the hit point, if any. The back face of one side
+    /// of a two-sided pair is skipped (its twin, at the same place, faces the ray).
     #[inline]
     pub fn trace(&self, origin: DVec3, dir: DVec3) -> Option<(u32, DVec3)> {
-        let ray = Ray::new(origin.as_vec3(), dir.as_vec3(), 0.0, f32::INFINITY);
-        let h = self.bvh.intersect(&ray)?;
+        let d = dir.as_vec3();
+        let ray = Ray::new(origin.as_vec3(), d, 0.0, f32::INFINITY);
+        let h = self.bvh.intersect_filtered(&ray, |prim| {
+            let (n, two) = self.facing[self.owner[prim as usize] as usize];
+            two && n.dot(d) > 0.0
+        })?;
         let p = origin + dir * h.t as f64;
         Some((self.owner[h.prim as usize], p))
     }
@@ -79,6 +92,21 @@ pub fn interpolate(mesh: &Mesh, e: u32, p: DVec3, vertex_b: &[Rgb]) -> Rgb {
         vb(0) * w0 + vb(1) * w1 + vb(2) * w2
     } else {
         let (u, v) = inverse_bilinear(p, &c, el.normal);
+        vb(0) * ((1.0 - u) * (1.0 - v)) + vb(1) * (u * (1.0 - v)) + vb(2) * (u * v) + vb(3) * ((1.0 - u) * v)
+    }
+}
+
+/// Value at element parameters (u, v): bilinear on quads, barycentric (weights of v1, v2)
+/// on triangles.
+#[inline]
+pub fn interpolate_uv(mesh: &Mesh, e: u32, u: f64, v: f64, vertex_b: &[Rgb]) -> Rgb {
+    let el = &mesh.elements[e as usize];
+    let vb = |k: usize| vertex_b[el.vertices[k] as usize];
+    let (u, v) = (u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+    if el.vertices[3] == crate::mesh::NO_VERTEX {
+        let w0 = (1.0 - u - v).max(0.0);
+        vb(0) * w0 + vb(1) * u + vb(2) * v
+    } else {
         vb(0) * ((1.0 - u) * (1.0 - v)) + vb(1) * (u * (1.0 - v)) + vb(2) * (u * v) + vb(3) * ((1.0 - u) * v)
     }
 }
@@ -146,7 +174,9 @@ pub fn inverse_bilinear(p: DVec3, c: &[DVec3; 4], normal: DVec3) -> (f64, f64) {
 }
 
 /// Renders the mesh with per-vertex radiosity `vertex_b` (Gouraud) or per-element
-/// radiosity `element_b` (flat).
+/// radiosity `element_b` (flat). Primary visibility comes from the rasteriser
+/// ([`super::raster`]); each sample's surface point is its camera ray's intersection with
+/// the visible element's plane.
 pub fn render(
     mesh: &Mesh,
     tracer: &ElementTracer,
@@ -158,9 +188,12 @@ pub fn render(
 ) -> Image {
     let (w, h) = (opts.width, opts.height);
     let s = opts.spp_axis.max(1);
+    progress.begin("render", h as u64);
+    let ids = super::raster::rasterize(mesh, cam, w * s, h * s, &|e| tracer.facing[e as usize].1);
+    // Planar elements face the eye entirely or not at all.
+    let front: Vec<bool> = mesh.elements.iter().map(|e| e.normal.dot(e.centroid - cam.eye) < 0.0).collect();
     let inv_spp = 1.0 / (s * s) as f64;
     let inv_pi = 1.0 / std::f64::consts::PI;
-    progress.begin("render", h as u64);
     let stopped = AtomicBool::new(false);
     let mut img = Image::new(w, h);
     img.pixels.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
@@ -172,20 +205,18 @@ pub fn render(
             let mut acc = Rgb::ZERO;
             for sj in 0..s {
                 for si in 0..s {
-                    let fx = x as f64 + (si as f64 + 0.5) / s as f64;
-                    let fy = y as f64 + (sj as f64 + 0.5) / s as f64;
-                    let dir = cam.direction(fx, fy);
-                    if let Some((e, p)) = tracer.trace(cam.eye, dir) {
-                        let el = &mesh.elements[e as usize];
-                        if el.normal.dot(dir) >= 0.0 {
-                            continue; // back side of a one-sided surface: black
-                        }
-                        let b = match opts.shading {
-                            Shading::Flat => element_b[e as usize],
-                            Shading::Gouraud => interpolate(mesh, e, p, vertex_b),
-                        };
-                        acc += b;
+                    let k = (y * s + sj) * ids.width + x * s + si;
+                    let e = ids.ids[k];
+                    if e == u32::MAX || !front[e as usize] {
+                        continue; // background, or the back of a one-sided surface: black
                     }
+                    acc += match opts.shading {
+                        Shading::Flat => element_b[e as usize],
+                        Shading::Gouraud => {
+                            let [u, v] = ids.uv[k];
+                            interpolate_uv(mesh, e, u as f64, v as f64, vertex_b)
+                        }
+                    };
                 }
             }
             *px = acc * (inv_spp * inv_pi);

@@ -5,10 +5,14 @@
 //! surfaces and empty background are black. Tone mapping is left to [`crate::output`].
 //!
 //! - [`gouraud`]: radiosity interpolated from the vertices (bilinear on quads,
-//!   barycentric on triangles), or flat per element.
+//!   barycentric on triangles), or flat per element — the instant preview.
+//! - [`gather`]: final gather — direct light exact per pixel, indirect light from the
+//!   solution — for images that match a path tracer.
 
 pub mod camera;
+pub mod gather;
 pub mod gouraud;
+pub mod raster;
 
 pub use camera::PinholeCamera;
 

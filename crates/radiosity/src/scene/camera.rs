@@ -40,29 +40,42 @@ impl Camera {
     /// Checks the camera is usable: finite, position ≠ look_at, up not parallel to the view,
     /// 0 < fov < 180.
     pub fn validate(&self) -> std::result::Result<(), String> {
-        let finite = self.position.is_finite() && self.look_at.is_finite() && self.up.is_finite();
-        if !finite || !self.vfov_deg.is_finite() {
-            return Err("camera values must be finite numbers".into());
+        self.check().map_err(|(_, m)| m)
+    }
+
+    /// [`Camera::validate`], also naming the field at fault (for error locations).
+    fn check(&self) -> std::result::Result<(), (&'static str, String)> {
+        for (field, v) in [("position", self.position), ("look_at", self.look_at), ("up", self.up)] {
+            if !v.is_finite() {
+                return Err((field, format!("camera {field} must be finite numbers, got {:?}", v.to_array())));
+            }
+        }
+        if !self.vfov_deg.is_finite() {
+            return Err(("vfov_deg", "camera values must be finite numbers".into()));
         }
         let fwd = self.look_at - self.position;
         if fwd.length() <= 0.0 {
-            return Err("camera position and look_at coincide".into());
+            return Err(("look_at", "camera position and look_at coincide".into()));
         }
         if fwd.normalize().cross(self.up).length() < 1e-9 {
-            return Err("camera up is parallel to the view direction (or zero)".into());
+            return Err(("up", "camera up is parallel to the view direction (or zero)".into()));
         }
         if !(self.vfov_deg > 0.0 && self.vfov_deg < 180.0) {
-            return Err(format!("vfov_deg must be between 0 and 180 degrees, got {}", self.vfov_deg));
+            return Err(("vfov_deg", format!("vfov_deg must be between 0 and 180 degrees, got {}", self.vfov_deg)));
         }
         Ok(())
     }
 
-    /// Parses the JSON form; `file` names the source in errors.
+    /// Parses the JSON form; `file` names the source in errors (with the line of the
+    /// offending key where one can be found).
     pub fn from_json_str(text: &str, file: &Path) -> Result<Camera> {
         let j: CameraJson = serde_json::from_str(text).map_err(|e| {
+            // serde_json's message ends in " at line L column C"; the location says it.
+            let full = e.to_string();
+            let msg = full.rfind(" at line ").map_or(full.as_str(), |i| &full[..i]).to_string();
             Error::Input {
-                loc: Location { file: file.into(), line: Some(e.line()), column: Some(e.column()) },
-                msg: format!("invalid camera JSON: {e}"),
+                loc: Location { file: file.into(), line: Some(e.line().max(1)), column: Some(e.column().max(1)) },
+                msg: format!("invalid camera JSON: {msg}"),
             }
         })?;
         let cam = Camera {
@@ -71,7 +84,14 @@ impl Camera {
             up: DVec3::from_array(j.up),
             vfov_deg: j.vfov_deg,
         };
-        cam.validate().map_err(|m| Error::input(Location::file(file), m))?;
+        cam.check().map_err(|(field, m)| {
+            let key = format!("\"{field}\"");
+            let loc = match text.find(&key) {
+                Some(off) => Location::line(file, text[..off].matches('\n').count() + 1),
+                None => Location::file(file),
+            };
+            Error::input(loc, m)
+        })?;
         Ok(cam)
     }
 
@@ -79,6 +99,45 @@ impl Camera {
     pub fn load_json(path: &Path) -> Result<Camera> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         Camera::from_json_str(&text, path)
+    }
+
+    /// Reads a list of views: a JSON array of cameras (the form above, each optionally with
+    /// a `"name"`), or an object `{"views": [...]}`. Unnamed views are called `view<k>`.
+    pub fn load_views(path: &Path) -> Result<Vec<(String, Camera)>> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| Error::Input {
+            loc: Location { file: path.into(), line: Some(e.line()), column: Some(e.column()) },
+            msg: format!("invalid views JSON: {e}"),
+        })?;
+        let list = match &v {
+            serde_json::Value::Array(a) => a.clone(),
+            serde_json::Value::Object(o) => match o.get("views") {
+                Some(serde_json::Value::Array(a)) => a.clone(),
+                _ => return Err(Error::input(Location::file(path), "expected a JSON array of cameras or {\"views\": [...]}")),
+            },
+            _ => return Err(Error::input(Location::file(path), "expected a JSON array of cameras or {\"views\": [...]}")),
+        };
+        if list.is_empty() {
+            return Err(Error::input(Location::file(path), "the view list is empty"));
+        }
+        let mut out = Vec::with_capacity(list.len());
+        for (k, item) in list.iter().enumerate() {
+            let name = item.get("name").and_then(|n| n.as_str()).map(str::to_string).unwrap_or_else(|| format!("view{k}"));
+            if !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.') {
+                return Err(Error::input(Location::file(path), format!("view {k}: name '{name}' may use only letters, digits, '_', '-' and '.'")));
+            }
+            let j: CameraJson = serde_json::from_value(item.clone())
+                .map_err(|e| Error::input(Location::file(path), format!("view {k} ('{name}'): {e}")))?;
+            let cam = Camera {
+                position: DVec3::from_array(j.position),
+                look_at: DVec3::from_array(j.look_at),
+                up: DVec3::from_array(j.up),
+                vfov_deg: j.vfov_deg,
+            };
+            cam.validate().map_err(|m| Error::input(Location::file(path), format!("view {k} ('{name}'): {m}")))?;
+            out.push((name, cam));
+        }
+        Ok(out)
     }
 
     /// A camera that frames a bounding box: looks at its centre from outside, along the

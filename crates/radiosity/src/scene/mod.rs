@@ -140,6 +140,9 @@ pub struct Polygon {
     pub object: u32,
     /// True for the generated back side of a two-sided input polygon.
     pub back_side: bool,
+    /// True when the polygon is one side of a two-sided pair (a coincident polygon with the
+    /// opposite normal exists): renderers and probes then ignore its back face.
+    pub two_sided: bool,
 }
 
 impl Polygon {

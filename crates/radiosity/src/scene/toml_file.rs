@@ -1,11 +1,345 @@
-//! TOML scene files (placeholder; see issue 2).
+//! TOML scene files: meshes by reference, plus a camera and per-material overrides.
+//!
+//! ```toml
+//! mesh = "cornell_box.obj"     # relative to this file: .obj, .gltf or .glb;
+//!                              # or "builtin:cornell" / "builtin:furnace";
+//!                              # or several: meshes = ["room.obj", "lamp.glb"]
+//! two_sided = false            # optional: every surface two-sided
+//!
+//! [camera]                     # optional; or camera = "camera.json" (relative path)
+//! position = [278, 273, -800]
+//! look_at = [278, 273, 0]
+//! up = [0, 1, 0]               # optional, default [0, 1, 0]
+//! vfov_deg = 39.3              # full vertical field of view, degrees
+//!
+//! [materials.light]            # overrides of the mesh's material named `light`
+//! emission = [17, 12, 4]       # emitted radiance L_e (linear RGB; exitance is π·L_e)
+//! reflectance = [0, 0, 0]      # diffuse reflectance ρ in [0, 1)
+//! two_sided = true
+//! ```
+//!
+//! Material names that are not bare TOML keys are quoted: `[materials."wall 1"]`. An
+//! override applies to every material of that name in every mesh; naming a material that no
+//! mesh has is an error that lists the names there are. As in Mitsuba, a key nobody reads
+//! is an error (serde `deny_unknown_fields`), so a typo such as `emision` is caught; every
+//! error names this file with line and column (the `toml` crate's byte span converted).
+//! Values are checked as in the other formats: reflectance finite and in [0, 1), emission
+//! finite and ≥ 0 (TOML allows `nan` and `inf`; they are rejected here).
+//!
+//! The camera given here replaces the mesh's own (a glTF camera); without one the first
+//! mesh's camera is used. With several meshes their materials and objects are
+//! concatenated in order. A glTF mesh's `baseColorFactor` ≥ 1 is an error unless an
+//! override here sets that material's reflectance: this is how a glTF exported with the
+//! default white base colour is made usable. Example: `scenes/cornell-blue-light.toml`.
 
-use std::path::Path;
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
 
-use super::SceneDesc;
-use crate::{Error, Location, Result};
+use glam::DVec3;
+use serde::de::{self, Deserializer, MapAccess, Visitor};
+use serde::Deserialize;
+use toml::Spanned;
 
-/// Reads a TOML scene file.
+use super::{builtin, gltf, obj, Camera, MaterialDesc, SceneDesc};
+use crate::{Error, Location, Result, Rgb};
+
+/// The prefix that names a built-in scene as a mesh (`mesh = "builtin:cornell"`).
+pub const BUILTIN_PREFIX: &str = "builtin:";
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileToml {
+    mesh: Option<Spanned<String>>,
+    meshes: Option<Spanned<Vec<Spanned<String>>>>,
+    two_sided: Option<bool>,
+    camera: Option<Spanned<CameraSpec>>,
+    #[serde(default)]
+    materials: BTreeMap<String, Spanned<MaterialToml>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MaterialToml {
+    reflectance: Option<Spanned<[f64; 3]>>,
+    emission: Option<Spanned<[f64; 3]>>,
+    two_sided: Option<bool>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraToml {
+    position: [f64; 3],
+    look_at: [f64; 3],
+    #[serde(default = "default_up")]
+    up: [f64; 3],
+    vfov_deg: f64,
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+
+/// `camera = "file.json"` or a `[camera]` table.
+enum CameraSpec {
+    File(String),
+    Inline(CameraToml),
+}
+
+impl<'de> Deserialize<'de> for CameraSpec {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = CameraSpec;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a camera JSON file name or a table with position, look_at, up, vfov_deg")
+            }
+            fn visit_str<E: de::Error>(self, s: &str) -> std::result::Result<CameraSpec, E> {
+                Ok(CameraSpec::File(s.to_string()))
+            }
+            fn visit_map<A: MapAccess<'de>>(self, map: A) -> std::result::Result<CameraSpec, A::Error> {
+                // Keeps the table's own errors (unknown key, wrong type) with their spans.
+                CameraToml::deserialize(de::value::MapAccessDeserializer::new(map)).map(CameraSpec::Inline)
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// Line and column (1-based) of byte `offset` in `text`.
+fn location(file: &Path, text: &str, offset: usize) -> Location {
+    let mut off = offset.min(text.len());
+    while !text.is_char_boundary(off) {
+        off -= 1;
+    }
+    let before = &text[..off];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    Location { file: file.into(), line: Some(line), column: Some(column) }
+}
+
+/// Reads a TOML scene file and the meshes it names.
 pub fn load_toml(path: &Path) -> Result<SceneDesc> {
-    Err(Error::input(Location::file(path), "TOML scene files are not available yet"))
+    let text = obj::read_text(path)?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    parse_toml(&text, path, &dir)
+}
+
+/// Parses TOML scene text; `file` names it in errors, relative paths are resolved from `dir`.
+pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
+    let at = |span: std::ops::Range<usize>| location(file, text, span.start);
+    let spec: FileToml = toml::from_str(text).map_err(|e| {
+        let loc = match e.span() {
+            Some(s) => at(s),
+            None => Location::file(file),
+        };
+        Error::input(loc, e.message().trim_end().to_string())
+    })?;
+
+    // Meshes.
+    let mesh_specs: Vec<Spanned<String>> = match (spec.mesh, spec.meshes) {
+        (Some(m), None) => vec![m],
+        (None, Some(list)) if !list.get_ref().is_empty() => list.into_inner(),
+        (None, Some(list)) => return Err(Error::input(at(list.span()), "`meshes` is empty")),
+        (Some(m), Some(_)) => return Err(Error::input(at(m.span()), "give either `mesh` or `meshes`, not both")),
+        (None, None) => {
+            return Err(Error::input(
+                Location::file(file),
+                "the scene file names no mesh: add `mesh = \"file.obj\"` (or .gltf, .glb, builtin:cornell)",
+            ))
+        }
+    };
+    let mut desc = SceneDesc {
+        name: file.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string(),
+        ..Default::default()
+    };
+    // Per merged material: does a glTF baseColorFactor still need its range check?
+    let mut from_gltf: Vec<bool> = Vec::new();
+    let mut mesh_camera: Option<Camera> = None;
+    for m in &mesh_specs {
+        let (part, is_gltf) = load_mesh(m.get_ref(), at(m.span()), dir)?;
+        let mo = desc.materials.len() as u32;
+        let oo = desc.objects.len() as u32;
+        from_gltf.extend(std::iter::repeat_n(is_gltf, part.materials.len()));
+        desc.materials.extend(part.materials);
+        desc.objects.extend(part.objects);
+        desc.polygons.extend(part.polygons.into_iter().map(|mut p| {
+            p.material += mo;
+            p.object += oo;
+            p
+        }));
+        desc.warnings.extend(part.warnings);
+        desc.two_sided |= part.two_sided;
+        if mesh_camera.is_none() {
+            mesh_camera = part.camera;
+        }
+    }
+    desc.two_sided |= spec.two_sided.unwrap_or(false);
+
+    // Camera.
+    desc.camera = match spec.camera {
+        None => mesh_camera,
+        Some(c) => {
+            let loc = at(c.span());
+            Some(match c.into_inner() {
+                CameraSpec::File(f) => {
+                    let p = dir.join(&f);
+                    if !p.is_file() {
+                        return Err(Error::input(loc, format!("camera file '{}' does not exist", p.display())));
+                    }
+                    Camera::load_json(&p)?
+                }
+                CameraSpec::Inline(t) => {
+                    let cam = Camera {
+                        position: DVec3::from_array(t.position),
+                        look_at: DVec3::from_array(t.look_at),
+                        up: DVec3::from_array(t.up),
+                        vfov_deg: t.vfov_deg,
+                    };
+                    cam.validate().map_err(|m| Error::input(loc, format!("camera: {m}")))?;
+                    cam
+                }
+            })
+        }
+    };
+
+    // Material overrides.
+    for (name, ov) in &spec.materials {
+        let loc = at(ov.span());
+        let ov = ov.get_ref();
+        let reflectance = match &ov.reflectance {
+            Some(r) => {
+                let v = *r.get_ref();
+                if v.iter().any(|c| !c.is_finite() || *c < 0.0 || *c >= 1.0) {
+                    return Err(Error::input(
+                        at(r.span()),
+                        format!("material '{name}': reflectance {v:?} is outside [0, 1) (a surface cannot reflect more than it receives)"),
+                    ));
+                }
+                Some(Rgb::from_array(v))
+            }
+            None => None,
+        };
+        let emission = match &ov.emission {
+            Some(e) => {
+                let v = *e.get_ref();
+                if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
+                    return Err(Error::input(
+                        at(e.span()),
+                        format!("material '{name}': emitted radiance {v:?} must be finite and non-negative"),
+                    ));
+                }
+                Some(Rgb::from_array(v))
+            }
+            None => None,
+        };
+        let mut found = false;
+        for (i, m) in desc.materials.iter_mut().enumerate().filter(|(_, m)| &m.name == name) {
+            found = true;
+            apply(m, reflectance, emission, ov.two_sided, &loc);
+            if reflectance.is_some() {
+                from_gltf[i] = false;
+            }
+        }
+        if !found {
+            let mut names: Vec<&str> = desc.materials.iter().map(|m| m.name.as_str()).collect();
+            names.sort_unstable();
+            names.dedup();
+            return Err(Error::input(
+                loc,
+                format!("[materials.{name}]: no material of that name in the mesh; its materials are: {}", names.join(", ")),
+            ));
+        }
+    }
+    let unchecked: Vec<MaterialDesc> =
+        desc.materials.iter().zip(&from_gltf).filter(|(_, g)| **g).map(|(m, _)| m.clone()).collect();
+    gltf::check_base_colors(&unchecked, file)?;
+    Ok(desc)
+}
+
+fn apply(m: &mut MaterialDesc, reflectance: Option<Rgb>, emission: Option<Rgb>, two_sided: Option<bool>, loc: &Location) {
+    if let Some(r) = reflectance {
+        m.reflectance = r;
+    }
+    if let Some(e) = emission {
+        m.emission = e;
+    }
+    if let Some(t) = two_sided {
+        m.two_sided = t;
+    }
+    if reflectance.is_some() || emission.is_some() {
+        // Later errors about this material's values point at the override.
+        m.loc = Some(loc.clone());
+    }
+}
+
+/// Loads one mesh reference; returns it and whether it is glTF.
+fn load_mesh(spec: &str, loc: Location, dir: &Path) -> Result<(SceneDesc, bool)> {
+    if let Some(name) = spec.strip_prefix(BUILTIN_PREFIX) {
+        return match builtin::by_name(name) {
+            Some(d) => Ok((d, false)),
+            None => Err(Error::input(
+                loc,
+                format!("'{spec}': no such built-in scene (there are: {})", builtin::NAMES.join(", ")),
+            )),
+        };
+    }
+    let path: PathBuf = dir.join(spec);
+    if !path.is_file() {
+        return Err(Error::input(loc, format!("mesh file '{}' does not exist", path.display())));
+    }
+    let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).unwrap_or_default();
+    match ext.as_str() {
+        "obj" => Ok((obj::load_obj(&path)?, false)),
+        "gltf" | "glb" => Ok((gltf::read_gltf(&path)?, true)),
+        other => Err(Error::input(
+            loc,
+            format!("mesh '{spec}': unknown format '.{other}' (expected .obj, .gltf, .glb or builtin:NAME)"),
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<SceneDesc> {
+        parse_toml(text, Path::new("s.toml"), Path::new("."))
+    }
+
+    #[test]
+    fn builtin_mesh_with_override() {
+        let d = parse("mesh = \"builtin:cornell\"\n[materials.light]\nemission = [1, 2, 3]\n").unwrap();
+        let light = d.materials.iter().find(|m| m.name == "light").unwrap();
+        assert_eq!(light.emission, Rgb::new(1., 2., 3.));
+        assert_eq!(light.loc.as_ref().unwrap().line, Some(2));
+        assert!(d.camera.is_some());
+    }
+
+    #[test]
+    fn unknown_keys_name_line_and_column() {
+        let e = parse("mesh = \"builtin:cornell\"\n[materials.light]\nemision = [1, 2, 3]\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:3:1:"), "{e}");
+        let e = parse("mesh = \"builtin:cornell\"\nfov = 3\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:2:1:"), "{e}");
+        let e = parse("mesh = \"builtin:cornell\"\n[camera]\nposition = [0, 0, 0]\nlook_at = [0, 0, 1]\nfov = 3\n")
+            .unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:5:1:"), "{e}");
+    }
+
+    #[test]
+    fn values_are_checked() {
+        let e = parse("mesh = \"builtin:cornell\"\n[materials.light]\nemission = [1, nan, 3]\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("finite"), "{e}");
+        let e = parse("mesh = \"builtin:cornell\"\n[materials.white]\nreflectance = [1, 0.5, 0.5]\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("[0, 1)"), "{e}");
+        let e = parse("mesh = \"builtin:cornell\"\n[materials.nope]\nemission = [1, 1, 1]\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:2:") && e.to_string().contains("green, light, red, white"), "{e}");
+    }
+
+    #[test]
+    fn location_counts_characters() {
+        let l = location(Path::new("f"), "ab\néé x", 8);
+        assert_eq!((l.line, l.column), (Some(2), Some(4)));
+    }
 }

@@ -116,9 +116,17 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             if two {
                 let mut rv = v.clone();
                 rv.reverse();
-                out.push(Polygon { vertices: rv, normal: -normal, area, material: p.material, object: p.object, back_side: true });
+                out.push(Polygon {
+                    vertices: rv,
+                    normal: -normal,
+                    area,
+                    material: p.material,
+                    object: p.object,
+                    back_side: true,
+                    two_sided: true,
+                });
             }
-            out.push(Polygon { vertices: v, normal, area, material: p.material, object: p.object, back_side: false });
+            out.push(Polygon { vertices: v, normal, area, material: p.material, object: p.object, back_side: false, two_sided: two });
         }
     }
     // Keep front sides before back sides of the same input polygon? Order does not matter

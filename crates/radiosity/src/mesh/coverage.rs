@@ -1,0 +1,182 @@
+//! Coverage: which parts of each element lie inside closed geometry.
+//!
+//! Real scenes put objects on floors and against walls without cutting the floor polygon
+//! along the contact (the Cornell boxes stand on the floor; RenderPark furniture touches
+//! walls). A constant element that straddles such a contact averages the lit part with the
+//! dark part underneath, and every other surface then sees it too dark — a first-order
+//! error that mesh refinement only halves per level. Instead, each element carries a fixed
+//! set of receiver points (`k × k` midpoints of a regular grid in its parameter domain,
+//! k = 1, 2, 3) and a point is *covered* when every one of [`PROBES`] probe rays leaving it
+//! (cosine-distributed about the normal) hits the back side of a surface first, i.e. the
+//! point lies inside a closed solid (for two-sided surfaces, "back" is the side opposite
+//! the input winding's front). Form factors are gathered at open points only, so the
+//! element's value is the radiosity of its open part; per-object averages weight each
+//! element by its open fraction (covered area counts as zero, as in the path-traced
+//! references), and the power formulation uses open areas.
+//!
+//! This is a cheap stand-in for discontinuity meshing along D0 discontinuities
+//! (Lischinski, Tampieri & Greenberg 1992).
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::Mesh;
+use crate::accel::SceneRays;
+use crate::sampling::{basis, cosine_hemisphere, halton2};
+use crate::scene::Scene;
+
+/// Probe rays per receiver point.
+pub const PROBES: u32 = 8;
+
+/// Largest receiver grid (k × k points).
+pub const MAX_K: usize = 3;
+
+/// Grid used to measure the open fraction of elements that a contact edge crosses.
+pub const FINE_K: usize = 8;
+
+/// Fixed receiver points of every element and which of them are open.
+#[derive(Clone, Debug, Default)]
+pub struct Receivers {
+    /// Per element, for k = 1..=MAX_K: the open points of the k × k grid (k = 1: the open
+    /// point nearest to the centroid of the open 3×3 points).
+    points: Vec<[Vec<DVec3>; MAX_K]>,
+    /// Per element, the open fraction of its area (estimated on the 3 × 3 grid).
+    pub open_fraction: Vec<f64>,
+    /// Probe rays cast.
+    pub rays: u64,
+}
+
+impl Receivers {
+    /// Open receiver points of element `e` on the `k × k` grid (1 ≤ k ≤ MAX_K). Empty when
+    /// the element is entirely covered.
+    #[inline]
+    pub fn points(&self, e: usize, k: usize) -> &[DVec3] {
+        &self.points[e][k.clamp(1, MAX_K) - 1]
+    }
+
+    /// Effective (open) area of every element.
+    pub fn open_areas(&self, mesh: &Mesh) -> Vec<f64> {
+        mesh.elements.iter().zip(&self.open_fraction).map(|(e, f)| e.area * f).collect()
+    }
+
+    /// Receivers with no coverage test (every point open).
+    pub fn all_open(mesh: &Mesh) -> Receivers {
+        let points = mesh
+            .elements
+            .iter()
+            .map(|e| {
+                let mut lv: [Vec<DVec3>; MAX_K] = Default::default();
+                for (k, l) in lv.iter_mut().enumerate() {
+                    *l = grid(e, &mesh.positions, k + 1);
+                }
+                lv[0] = vec![e.centroid];
+                lv
+            })
+            .collect();
+        Receivers { points, open_fraction: vec![1.0; mesh.len()], rays: 0 }
+    }
+
+    /// Receivers with the coverage test.
+    pub fn compute(scene: &Scene, mesh: &Mesh, rays: &SceneRays) -> Receivers {
+        let diag = scene.diagonal().max(f64::MIN_POSITIVE);
+        let res: Vec<([Vec<DVec3>; MAX_K], f64)> = mesh
+            .elements
+            .par_iter()
+            .with_min_len(16)
+            .map(|e| {
+                let mut lv: [Vec<DVec3>; MAX_K] = Default::default();
+                let mut open3 = 0usize;
+                let mut n3 = 0usize;
+                for k in 1..=MAX_K {
+                    for p in grid(e, &mesh.positions, k) {
+                        let open = !covered(p, e.normal, e.patch, scene, rays, diag);
+                        if k == MAX_K {
+                            n3 += 1;
+                            if open {
+                                open3 += 1;
+                            }
+                        }
+                        if open {
+                            lv[k - 1].push(p);
+                        }
+                    }
+                }
+                // A mixed 3×3 result means a contact edge crosses the element: estimate the
+                // open fraction on a finer grid (reciprocity depends on it).
+                // Near such an edge the exchange with the touching surface is singular, so the
+                // finest receiver set becomes the open points of that grid too.
+                let open3_pts = lv[MAX_K - 1].clone();
+                let mut frac = open3 as f64 / n3 as f64;
+                // A contact edge can cross a corner without touching the 3×3 points: probe
+                // the corners too (pulled 2 % towards the centroid).
+                let (corners, nc) = e.corners(&mesh.positions);
+                let corner_covered = open3 == n3
+                    && corners[..nc].iter().any(|c| covered(*c + (e.centroid - *c) * 0.02, e.normal, e.patch, scene, rays, diag));
+                if open3 > 0 && (open3 < n3 || corner_covered) {
+                    let fine = grid(e, &mesh.positions, FINE_K);
+                    let open: Vec<DVec3> =
+                        fine.iter().copied().filter(|p| !covered(*p, e.normal, e.patch, scene, rays, diag)).collect();
+                    if !open.is_empty() {
+                        frac = open.len() as f64 / fine.len() as f64;
+                        lv[MAX_K - 1] = open;
+                    }
+                }
+                // k = 1: the centroid when the whole element is open, else the open point
+                // nearest the centre of the open part.
+                lv[0] = if open3 == n3 {
+                    vec![e.centroid]
+                } else {
+                    let pool = if open3_pts.is_empty() { &lv[MAX_K - 1] } else { &open3_pts };
+                    if pool.is_empty() {
+                        Vec::new()
+                    } else {
+                        let c = pool.iter().copied().sum::<DVec3>() / pool.len() as f64;
+                        let best = pool
+                            .iter()
+                            .copied()
+                            .min_by(|a, b| (*a - c).length_squared().total_cmp(&(*b - c).length_squared()));
+                        best.into_iter().collect()
+                    }
+                };
+                if lv[1].is_empty() {
+                    lv[1] = lv[MAX_K - 1].clone();
+                }
+                (lv, frac)
+            })
+            .collect();
+        let (points, open_fraction): (Vec<_>, Vec<f64>) = res.into_iter().unzip();
+        let mixed = open_fraction.iter().filter(|f| **f > 0.0 && **f < 1.0).count() as u64;
+        let rays = PROBES as u64 * ((1 + 4 + 9 + 4) * mesh.len() as u64 + (FINE_K * FINE_K) as u64 * mixed);
+        Receivers { points, open_fraction, rays }
+    }
+}
+
+/// Midpoints of the k × k grid in the element's parameter domain.
+fn grid(e: &super::Element, positions: &[DVec3], k: usize) -> Vec<DVec3> {
+    let mut v = Vec::with_capacity(k * k);
+    for j in 0..k {
+        for i in 0..k {
+            v.push(e.point(positions, (i as f64 + 0.5) / k as f64, (j as f64 + 0.5) / k as f64));
+        }
+    }
+    v
+}
+
+/// True when every probe ray from `p` hits a back face first.
+fn covered(p: DVec3, n: DVec3, patch: u32, scene: &Scene, rays: &SceneRays, diag: f64) -> bool {
+    let (t, b) = basis(n);
+    let origin = (p + n * (1e-7 * diag)).as_vec3();
+    for s in 0..PROBES {
+        let (u1, u2) = halton2(s, (0.5 / PROBES as f64, 0.25));
+        let d = cosine_hemisphere(u1, u2);
+        let dir = t * d.x + b * d.y + n * d.z;
+        // A hit "from behind" is the back of a one-sided surface, or the generated back
+        // copy of a two-sided one (behind its input winding's front): inside a two-sided box
+        // counts as inside, as for a one-sided one.
+        match rays.closest_facing(origin, dir.as_vec3(), f32::INFINITY, Some(patch)) {
+            Some((_, q)) if scene.polygons[q as usize].back_side || scene.polygons[q as usize].normal.dot(dir) > 0.0 => {}
+            _ => return false,
+        }
+    }
+    true
+}
