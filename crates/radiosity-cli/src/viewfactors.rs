@@ -57,7 +57,7 @@ pub struct ViewfactorsArgs {
     #[arg(long)]
     pub two_sided: bool,
     /// Point-sampled: visibility rays per receiver point (n × n).
-    #[arg(long, value_name = "N", default_value_t = 2)]
+    #[arg(long, value_name = "N", default_value_t = 1)]
     pub visibility_samples: usize,
     #[command(flatten)]
     pub ff: FormFactorTuning,

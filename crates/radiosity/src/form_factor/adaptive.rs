@@ -62,6 +62,7 @@ pub(crate) struct Scratch {
     an: analytic::Scratch,
     heap: BinaryHeap<Region>,
     shaft: Vec<(DVec3, f64)>,
+    rshaft: Vec<(DVec3, f64)>,
 }
 
 #[derive(Default)]
@@ -80,6 +81,7 @@ struct EvalScratch {
 /// The receiver of a pair: its polygon, plane frame and 2-D outline (counter-clockwise).
 struct Receiver<'p> {
     verts: &'p [DVec3],
+    normal: DVec3,
     frame: PlaneFrame,
     outline: Vec<DVec2>,
     centroid: DVec3,
@@ -97,7 +99,7 @@ impl<'p> Receiver<'p> {
         let area = 0.5 * area2_2d(&outline).abs();
         let size = area.sqrt();
         let centroid = verts.iter().copied().sum::<DVec3>() / verts.len() as f64;
-        Receiver { verts, frame, outline, centroid, eps2: 1e-12 * size, min_area: 1e-14 * area }
+        Receiver { verts, normal, frame, outline, centroid, eps2: 1e-12 * size, min_area: 1e-14 * area }
     }
 }
 
@@ -252,7 +254,7 @@ impl Rows<'_> {
             let diam = (hi - lo).length();
             let ci = si.iter().copied().sum::<DVec3>() / si.len() as f64;
             let dist = (recv.centroid - ci).length().max(1e-300);
-            ((2.0 * diam / dist).log2().ceil() as i32).clamp(1, 4) as u32
+            ((2.0 * diam / dist).log2().ceil() as i32).clamp(0, 4) as u32
         };
         let pieces = self.sender_pieces(&si, ni, s);
         let mut total = 0.0;
@@ -316,17 +318,19 @@ impl Rows<'_> {
         (0..set.len()).map(|k| set.piece(k).iter().map(|q| frame.to_3d(*q)).collect()).collect()
     }
 
-    /// Adaptive cubature of `F(dA_x → V_j(x))` over the sender.
+    /// Adaptive cubature of `F(dA_x → V_j(x))` over the sender. Each region keeps the
+    /// occluders that can still reach the shaft between it and the receiver; a region left
+    /// with none is integrated exactly (contour integral, error 0), so only regions in
+    /// penumbra are ever refined, and each evaluation there clips only its own occluders.
     fn integrate(&self, pi: &[DVec3], ni: DVec3, recv: &Receiver, min_level: u32, s: &mut Scratch) -> f64 {
         let opts = self.ctx.opts;
         let area_i = super::geom::area_3d(pi);
-        let Scratch { occ, eval, heap, .. } = s;
-        let occ: &[u32] = occ;
-        let mut f = |x: DVec3| self.visible_factor(x, ni, recv, occ, eval);
+        let Scratch { occ, eval, heap, an, rshaft, .. } = s;
         heap.clear();
         let mut evals = 0usize;
         let mut total = 0.0;
         let mut err = 0.0;
+        let mut ctx = RegionCtx { rows: self, ni, recv, eval, an, shaft: rshaft };
         for k in 1..pi.len() - 1 {
             let tri = [pi[0], pi[k], pi[k + 1]];
             let mut todo = vec![tri];
@@ -334,8 +338,7 @@ impl Rows<'_> {
                 todo = todo.iter().flat_map(split4).collect();
             }
             for t in todo {
-                let r = Region::eval(t, &mut f);
-                evals += EVALS_PER_REGION;
+                let r = ctx.eval(t, occ, &mut evals);
                 total += r.est;
                 err += r.err;
                 heap.push(r);
@@ -355,11 +358,14 @@ impl Rows<'_> {
                 }
             }
             let Some(worst) = heap.pop() else { break };
+            if worst.err == 0.0 {
+                heap.push(worst);
+                break;
+            }
             total -= worst.est;
             err -= worst.err;
             for t in split4(&worst.tri) {
-                let r = Region::eval(t, &mut f);
-                evals += EVALS_PER_REGION;
+                let r = ctx.eval(t, &worst.occ, &mut evals);
                 total += r.est;
                 err += r.err;
                 heap.push(r);
@@ -478,30 +484,59 @@ fn shaft_planes(pi: &[DVec3], pj: &[DVec3], eps: f64, out: &mut Vec<(DVec3, f64)
 
 const EVALS_PER_REGION: usize = 9 + 16;
 
-/// A sender triangle with its estimate of `∫ f` and the error of that estimate.
+/// A sender triangle with its estimate of `∫ f`, the error of that estimate, and the
+/// occluders that can reach the shaft between it and the receiver.
 struct Region {
     tri: [DVec3; 3],
     est: f64,
     err: f64,
+    occ: Vec<u32>,
 }
 
-impl Region {
-    fn eval(tri: [DVec3; 3], f: &mut impl FnMut(DVec3) -> f64) -> Region {
+/// What evaluating a region needs.
+struct RegionCtx<'r, 'a> {
+    rows: &'r Rows<'a>,
+    ni: DVec3,
+    recv: &'r Receiver<'r>,
+    eval: &'r mut EvalScratch,
+    an: &'r mut analytic::Scratch,
+    shaft: &'r mut Vec<(DVec3, f64)>,
+}
+
+impl RegionCtx<'_, '_> {
+    fn eval(&mut self, tri: [DVec3; 3], parent_occ: &[u32], evals: &mut usize) -> Region {
+        // The parent's occluders that still meet this region's shaft.
+        let eps = self.rows.ctx.eps;
+        shaft_planes(&tri, self.recv.verts, eps, self.shaft);
+        let polys = &self.rows.ctx.scene.polygons;
+        let occ: Vec<u32> = parent_occ
+            .iter()
+            .copied()
+            .filter(|&o| {
+                let v = &polys[o as usize].vertices;
+                !self.shaft.iter().any(|(n, d)| v.iter().all(|p| n.dot(*p) - d <= eps))
+            })
+            .collect();
+        if occ.is_empty() {
+            let est = analytic::area_factor_with(self.an, &tri, self.ni, self.recv.verts, self.recv.normal);
+            return Region { tri, est, err: 0.0, occ };
+        }
+        *evals += EVALS_PER_REGION;
         let area2 = (tri[1] - tri[0]).cross(tri[2] - tri[0]).length();
-        let rule = |n: usize, f: &mut dyn FnMut(DVec3) -> f64| {
+        let mut rule = |n: usize| {
             let gl = gauss_legendre(n);
             let mut acc = 0.0;
             for &(x, wx) in gl {
                 for &(y, wy) in gl {
                     let p = tri[0] + (tri[1] - tri[0]) * x + (tri[2] - tri[1]) * (x * y);
-                    acc += wx * wy * x * f(p);
+                    acc += wx * wy * x * self.rows.visible_factor(p, self.ni, self.recv, &occ, self.eval);
                 }
             }
             acc * area2
         };
-        let lo = rule(3, f);
-        let hi = rule(4, f);
-        Region { tri, est: hi, err: (hi - lo).abs() }
+        let lo = rule(3);
+        let hi = rule(4);
+        Region { tri, est: hi, err: (hi - lo).abs(), occ }
     }
 }
 

@@ -11,6 +11,8 @@
 //! closure as `max_i |1 − Σ_j F_ij|` together with the smallest and largest row sums (for
 //! an open scene only the largest, which must stay ≤ 1, is meaningful).
 
+use rayon::prelude::*;
+
 use crate::transport::DenseMatrix;
 
 /// What is wrong with a matrix, in numbers.
@@ -121,20 +123,44 @@ impl Diagnostics {
             rows.add_row(r, &buf);
         }
         let mut d = rows.finish();
-        let (mut abs, mut rel, mut worst) = (0.0f64, 0.0f64, None);
-        for (a, &i) in index.iter().enumerate() {
-            for (b, &j) in index.iter().enumerate().skip(a + 1) {
-                let x = areas[i] * m.get(i, j);
-                let y = areas[j] * m.get(j, i);
-                let e = (x - y).abs();
-                abs = abs.max(e);
-                let big = x.abs().max(y.abs());
-                if big > 0.0 && e / big > rel {
-                    rel = e / big;
-                    worst = Some([a, b]);
+        // Pairs (a, b), a < b, in 64 × 64 tiles so that both m[i][j] and m[j][i] stream
+        // through the cache; tiles in parallel.
+        const T: usize = 64;
+        let k = index.len();
+        let tiles: Vec<(usize, usize)> =
+            (0..k).step_by(T).flat_map(|a0| (a0..k).step_by(T).map(move |b0| (a0, b0))).collect();
+        let (abs, rel, worst) = tiles
+            .par_iter()
+            .map(|&(a0, b0)| {
+                let (mut abs, mut rel, mut worst) = (0.0f64, 0.0f64, None);
+                for a in a0..(a0 + T).min(k) {
+                    let i = index[a];
+                    for b in b0.max(a + 1)..(b0 + T).min(k) {
+                        let j = index[b];
+                        let x = areas[i] * m.get(i, j);
+                        let y = areas[j] * m.get(j, i);
+                        let e = (x - y).abs();
+                        abs = abs.max(e);
+                        let big = x.abs().max(y.abs());
+                        if big > 0.0 && e / big > rel {
+                            rel = e / big;
+                            worst = Some([a, b]);
+                        }
+                    }
                 }
-            }
-        }
+                (abs, rel, worst)
+            })
+            .reduce(
+                || (0.0, 0.0, None),
+                |p, q| {
+                    let abs = p.0.max(q.0);
+                    if q.1 > p.1 || (q.1 == p.1 && q.2 < p.2 && q.2.is_some()) {
+                        (abs, q.1, q.2)
+                    } else {
+                        (abs, p.1, p.2)
+                    }
+                },
+            );
         d.reciprocity_max_abs = Some(abs);
         d.reciprocity_max_rel = Some(rel);
         d.reciprocity_worst_pair = worst;
