@@ -4,8 +4,10 @@
 //! One file per subcommand; each parses raw flags (clap) and validates them into the
 //! library's settings before any work starts.
 
+mod bench;
 mod common;
 mod compare;
+mod plot;
 mod progress;
 mod render;
 mod solve;
@@ -33,6 +35,9 @@ enum Command {
     Compare(compare::CompareArgs),
     /// Compute a view-factor matrix (CSV, NumPy .npy, JSON or View3D text) with diagnostics.
     Viewfactors(viewfactors::ViewfactorsArgs),
+    /// Benchmarks (`bench rays`: BVH throughput on incoherent rays, against Embree with
+    /// `--features embree`).
+    Bench(bench::BenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -43,11 +48,13 @@ fn main() -> ExitCode {
         Command::Solve(a) => solve::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Viewfactors(a) => viewfactors::run(a),
+        Command::Bench(a) => bench::run(a),
     };
     match result {
         Ok(code) => code,
+        // Interrupted before any usable result existed (e.g. during form factors).
         Err(e) if matches!(e.downcast_ref::<radiosity::Error>(), Some(radiosity::Error::Cancelled)) => {
-            eprintln!("interrupted before a solution existed (during form factors): no output written");
+            eprintln!("interrupted before a solution existed: nothing written");
             ExitCode::from(130)
         }
         Err(e) => {

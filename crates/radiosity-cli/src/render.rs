@@ -1,20 +1,26 @@
-//! `radiosity render`: solve, then draw the scene from a camera.
+//! `radiosity render`: solve, then draw the scene from one camera or a list of views;
+//! `--frames DIR` also draws the scene after every solver iteration.
 
-use std::path::PathBuf;
+use std::cell::OnceCell;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{bail, Result};
 use clap::Args;
 use glam::DVec3;
+use radiosity::mesh::Mesh;
 use radiosity::output;
-use radiosity::report::ViewReport;
-use radiosity::pipeline::solve_scene;
+use radiosity::pipeline::{render_radiosity, solve_scene, solve_scene_observed};
 use radiosity::render::gather;
 use radiosity::render::gouraud::{self, ElementTracer, Shading};
-use radiosity::scene::Camera;
+use radiosity::render::Image;
+use radiosity::report::ViewReport;
+use radiosity::scene::{Camera, Scene};
+use radiosity::solve::IterationState;
+use radiosity::NoProgress;
 
-use crate::common::{exit_code, write_atomic, SolveFlags};
+use crate::common::{energy_summary, exit_code, write_atomic, SolveFlags};
 use crate::progress::CliProgress;
 
 /// Flags of `radiosity render`.
@@ -68,6 +74,21 @@ pub struct RenderArgs {
     /// PNG exposure: radiance is multiplied by this before sRGB encoding [default: automatic].
     #[arg(long, value_name = "SCALE")]
     pub exposure: Option<f64>,
+    /// Also write an image after every solver iteration into this folder (frame-0001.png …
+    /// and frames.json): light flowing into the scene bounce by bounce (progressive
+    /// refinement: after 1, 2, 4 … shots, then every n shots). Frames are Gouraud previews
+    /// of the first view, all at the final image's exposure, so the sequence brightens.
+    #[arg(long, value_name = "DIR")]
+    pub frames: Option<PathBuf>,
+}
+
+/// One frame of `--frames`, kept in memory (f32) until the final exposure is known.
+struct Frame {
+    iteration: usize,
+    residual: f64,
+    seconds: f64,
+    rays: u64,
+    pixels: Vec<[f32; 3]>,
 }
 
 fn parse_vec3(s: &str) -> Result<DVec3, String> {
@@ -85,6 +106,9 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let t0 = Instant::now();
     let settings = a.solve.settings()?;
     a.solve.init_threads()?;
+    if a.solve.all_solvers() {
+        bail!("--solver all compares solvers: use it with `radiosity solve` (and --plot); render one solver");
+    }
     if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
         bail!("--width and --height must be between 1 and 16384");
     }
@@ -149,29 +173,49 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     };
 
     let progress = CliProgress::new(a.solve.quiet);
-    let solved = solve_scene(scene, &settings, &progress)?;
+    let preview = gouraud::Options { width: a.width, height: a.height, spp_axis: spp.min(3), shading };
+    let two_sided_of = |scene: &Scene| -> Vec<bool> { scene.polygons.iter().map(|p| p.two_sided).collect() };
+    let tracer_cell: OnceCell<ElementTracer> = OnceCell::new();
+    let mut frames: Vec<Frame> = Vec::new();
+    let frame_cam = views[0].1;
+    let solved = if a.frames.is_some() {
+        let mut observer = |scene: &Scene, mesh: &Mesh, st: &IterationState| {
+            let tracer = tracer_cell.get_or_init(|| ElementTracer::new(mesh, &two_sided_of(scene)));
+            let img = render_radiosity(scene, mesh, tracer, st.radiosity, &frame_cam, &preview, &NoProgress);
+            let pixels = img.pixels.iter().map(|p| p.as_vec3().to_array()).collect();
+            frames.push(Frame { iteration: st.iteration, residual: st.residual, seconds: st.seconds, rays: st.rays, pixels });
+        };
+        solve_scene_observed(scene, &settings, &progress, Some(&mut observer))?
+    } else {
+        solve_scene(scene, &settings, &progress)?
+    };
     let stats = &solved.solution.stats;
     if !a.solve.quiet {
+        let ff = match &solved.ff_stats {
+            Some(f) => format!("{} form factors ({} rays)", f.nonzeros, f.rays),
+            None => "no form factors".into(),
+        };
+        let rays = if stats.rays > 0 { format!(", {} solver rays", stats.rays) } else { String::new() };
         eprintln!(
-            "{} elements, {} form factors ({} rays), {} {} iterations, residual {:.2e} ({:?})",
+            "{} elements, {ff}, {} {} iterations, residual {:.2e} ({:?}){rays}",
             solved.mesh.len(),
-            solved.ff_stats.nonzeros,
-            solved.ff_stats.rays,
             stats.solver,
             stats.iterations,
             stats.residual,
             stats.stop
         );
+        eprintln!("{}", energy_summary(&solved.energy()));
     }
 
     let t = Instant::now();
-    let two_sided: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
-    let tracer = ElementTracer::new(&solved.mesh, &two_sided);
+    let tracer =
+        tracer_cell.into_inner().unwrap_or_else(|| ElementTracer::new(&solved.mesh, &two_sided_of(&solved.scene)));
     let indirect = if gather { Some(solved.indirect_irradiance().1) } else { None };
     let mut report = solved.report();
     report.timings.load = load_s;
     // Images are drawn even after an interrupt: the solution so far is what we have.
     let quiet = CliProgress::new(a.solve.quiet);
+    let mut first_exposure = None;
     for (name, cam, png_path, exr_path) in &views {
         let tv = Instant::now();
         let (img, rays) = match &indirect {
@@ -193,7 +237,9 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             }
         };
         let mut files = vec![png_path.display().to_string()];
-        write_atomic(png_path, &output::png::encode(&img, a.exposure)?)?;
+        let exposure = a.exposure.unwrap_or_else(|| output::auto_exposure(&img));
+        first_exposure.get_or_insert(exposure);
+        write_atomic(png_path, &output::png::encode(&img, Some(exposure))?)?;
         if let Some(p) = exr_path {
             write_atomic(p, &output::exr::encode(&img)?)?;
             files.push(p.display().to_string());
@@ -201,6 +247,10 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         report.rays_cast += rays;
         report.images.extend(files.iter().cloned());
         report.views.push(ViewReport { name: name.clone(), images: files, seconds: tv.elapsed().as_secs_f64(), rays });
+    }
+    if let Some(dir) = &a.frames {
+        let exposure = first_exposure.unwrap_or(1.0);
+        report.images.extend(write_frames(dir, &frames, a.width, a.height, exposure)?);
     }
     report.timings.render = t.elapsed().as_secs_f64();
     report.timings.total = t0.elapsed().as_secs_f64();
@@ -221,6 +271,27 @@ fn suffixed(path: &std::path::Path, name: &str) -> PathBuf {
         None => format!("{stem}_{name}"),
     };
     path.with_file_name(file)
+}
+
+/// Writes the frames as PNG with one exposure, and frames.json describing them; returns
+/// the files written.
+fn write_frames(dir: &Path, frames: &[Frame], width: usize, height: usize, exposure: f64) -> Result<Vec<String>> {
+    let mut files = Vec::new();
+    let mut index = Vec::new();
+    for (k, f) in frames.iter().enumerate() {
+        let img = Image { width, height, pixels: f.pixels.iter().map(|p| DVec3::from_array(p.map(f64::from))).collect() };
+        let name = format!("frame-{:04}.png", k + 1);
+        let path = dir.join(&name);
+        write_atomic(&path, &output::png::encode(&img, Some(exposure))?)?;
+        files.push(path.display().to_string());
+        index.push(serde_json::json!({
+            "file": name, "iteration": f.iteration, "residual": f.residual,
+            "seconds": f.seconds, "rays": f.rays,
+        }));
+    }
+    let json = serde_json::json!({ "exposure": exposure, "frames": index });
+    write_atomic(&dir.join("frames.json"), serde_json::to_string_pretty(&json)?.as_bytes())?;
+    Ok(files)
 }
 
 /// Forwards progress but never asks to stop (used for output after an interrupt).

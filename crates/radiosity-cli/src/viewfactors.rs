@@ -267,6 +267,7 @@ fn summarize(d: &Diagnostics, seconds: f64, stats: &form_factor::Stats) {
 fn write_atomic_stream(path: &Path, f: impl FnOnce(BufWriter<File>) -> Result<()>) -> Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let name = path.file_name().with_context(|| format!("{}: not a file name", path.display()))?;
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create folder {}", dir.display()))?;
     let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
     let file = File::create(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
     match f(BufWriter::with_capacity(1 << 20, file)) {

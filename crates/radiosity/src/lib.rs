@@ -17,7 +17,8 @@
 //! The library never prints and never exits: errors are typed ([`Error`], with file:line for
 //! input errors), progress and cancellation go through [`progress::Progress`].
 #![warn(missing_docs)]
-#![forbid(unsafe_code)]
+// `unsafe` only in `accel::bvh::avx2` (SIMD intrinsics behind run-time detection; see there).
+#![deny(unsafe_code)]
 
 pub mod accel;
 pub mod error;

@@ -1,6 +1,9 @@
 //! The pipeline end to end, as the program runs it: scene → mesh → rays → form factors →
 //! solve → reconstruct → render. Tests call these functions so that they test what users
-//! run.
+//! run. The stochastic solvers skip the form factors (they cast rays against the scene's
+//! polygons instead); [`solve_all`] runs every solver on one mesh and one set of form factors.
+//! With [`Settings::adaptive`] the uniform mesh is refined a priori before the first solve
+//! and, per a posteriori pass, on the solution, with coverage and form factors recomputed.
 
 use std::time::Instant;
 
@@ -8,14 +11,14 @@ use crate::accel::SceneRays;
 use crate::form_factor;
 use crate::mesh::{self, Mesh, Receivers};
 use crate::reconstruct;
-use crate::render::gouraud::{self, ElementTracer};
 use crate::render::gather;
+use crate::render::gouraud::{self, ElementTracer};
 use crate::render::{Image, PinholeCamera};
-use crate::report::{EnergyReport, ObjectReport, Report, Timings};
+use crate::report::{ComparisonRow, EnergyReport, ObjectReport, Report, Timings};
 use crate::scene::{Camera, Scene};
-use crate::solve::{self, Solution, Solver, System};
+use crate::solve::{self, IterationState, RaySystem, Solution, Solver, System};
 use crate::transport::{SparseRows, Transport};
-use crate::{Progress, Result, Rgb};
+use crate::{Error, Progress, Result, Rgb};
 
 /// Everything that decides a solution.
 #[derive(Clone, Debug)]
@@ -30,6 +33,9 @@ pub struct Settings {
     pub solve: solve::Options,
     /// Refuse meshes with more elements than this (form factors cost grows as n²).
     pub max_elements: u64,
+    /// Adaptive refinement of the uniform mesh (None: uniform only); `mesh_size` is then the
+    /// size before refinement.
+    pub adaptive: Option<mesh::adaptive::Options>,
 }
 
 impl Default for Settings {
@@ -40,6 +46,7 @@ impl Default for Settings {
             solver: Solver::Jacobi,
             solve: solve::Options::default(),
             max_elements: DEFAULT_MAX_ELEMENTS,
+            adaptive: None,
         }
     }
 }
@@ -57,17 +64,23 @@ pub struct Solved {
     pub rays: SceneRays,
     /// Receiver points and open (uncovered) fraction of every element.
     pub receivers: Receivers,
-    /// The form-factor rows.
-    pub transport: SparseRows,
-    /// Form-factor statistics.
-    pub ff_stats: form_factor::Stats,
+    /// The form-factor rows (None for the stochastic solvers, which never compute them).
+    pub transport: Option<SparseRows>,
+    /// Form-factor statistics (None when none were computed).
+    pub ff_stats: Option<form_factor::Stats>,
     /// The solution.
     pub solution: Solution,
     /// Per-vertex radiosity (display values, Gouraud).
     pub vertex_radiosity: Vec<Rgb>,
     /// Stage timings so far.
     pub timings: Timings,
+    /// Adaptive refinement, pass by pass (empty for a uniform mesh).
+    pub refinement: Vec<mesh::adaptive::PassStats>,
 }
+
+/// Called after solver iterations with the scene and mesh being solved and the state
+/// (see [`solve::solve_observed`]); the program draws the frames of `render --frames`.
+pub type FrameObserver<'a> = dyn FnMut(&Scene, &Mesh, &IterationState<'_>) + 'a;
 
 /// Per-element reflectance and emitted exitance.
 pub fn element_materials(scene: &Scene, mesh: &Mesh) -> (Vec<Rgb>, Vec<Rgb>) {
@@ -80,8 +93,30 @@ pub fn element_materials(scene: &Scene, mesh: &Mesh) -> (Vec<Rgb>, Vec<Rgb>) {
         .unzip()
 }
 
-/// Meshes, builds the BVH, computes form factors and solves.
-pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Solved> {
+/// Everything up to the solver: mesh, rays, and the form factors (deterministic solvers
+/// only; the stochastic ones cast rays instead).
+struct Prepared {
+    scene: Scene,
+    mesh: Mesh,
+    rays: SceneRays,
+    receivers: Receivers,
+    transport: Option<SparseRows>,
+    ff_stats: Option<form_factor::Stats>,
+    reflectance: Vec<Rgb>,
+    emission: Vec<Rgb>,
+    area: Vec<f64>,
+    timings: Timings,
+    refinement: Vec<mesh::adaptive::PassStats>,
+    /// Rays cast by refinement so far (counted into the form-factor statistics).
+    refine_rays: u64,
+}
+
+fn prepare(
+    scene: Scene,
+    settings: &Settings,
+    form_factors: bool,
+    progress: &dyn Progress,
+) -> Result<(Prepared, Option<mesh::adaptive::Refiner>)> {
     let mut timings = Timings::default();
     let t = Instant::now();
     let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
@@ -98,42 +133,308 @@ pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -
             }
         }
         let many = if count == u64::MAX { "more than 10^19".to_string() } else { count.to_string() };
-        return Err(crate::Error::Invalid(format!(
+        return Err(Error::Invalid(format!(
             "mesh size {size:.4e} would create {many} elements (limit {}); use --mesh-size {hi:.4e} or larger, or raise --max-elements",
             settings.max_elements
         )));
     }
-    let mesh = mesh::mesh_uniform(&scene, size);
+    let mut mesh = mesh::mesh_uniform(&scene, size);
     timings.mesh = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let rays = SceneRays::new(&scene.polygons);
     timings.bvh = t.elapsed().as_secs_f64();
 
+    // A priori refinement (direct-light bends, contact lines) before any solve.
     let t = Instant::now();
-    let receivers = Receivers::compute(&scene, &mesh, &rays);
-    let (transport, mut ff_stats) =
-        form_factor::compute(&scene, &mesh, &rays, &receivers, &settings.form_factors, progress)?;
-    ff_stats.rays += receivers.rays;
-    timings.form_factors = t.elapsed().as_secs_f64();
+    let mut refinement = Vec::new();
+    let mut refine_rays = 0;
+    let refiner = match &settings.adaptive {
+        Some(a) => {
+            let mut r = mesh::adaptive::Refiner::new(&scene, &mesh);
+            let (stats, n) = mesh::adaptive::refine_a_priori(&scene, &rays, &mut r, a);
+            refine_rays += n;
+            refinement.push(stats);
+            mesh = r.mesh().clone();
+            Some(r)
+        }
+        None => None,
+    };
+    timings.mesh += t.elapsed().as_secs_f64();
+    let prepared = Prepared {
+        scene,
+        mesh,
+        rays,
+        receivers: Receivers::default(),
+        transport: None,
+        ff_stats: None,
+        reflectance: Vec::new(),
+        emission: Vec::new(),
+        area: Vec::new(),
+        timings,
+        refinement,
+        refine_rays,
+    };
+    Ok((prepared.with_factors(settings, form_factors, progress)?, refiner))
+}
 
-    let t = Instant::now();
-    let (rho, emission) = element_materials(&scene, &mesh);
-    let area = receivers.open_areas(&mesh);
-    let system = System { transport: &transport, reflectance: &rho, emission: &emission, area: &area };
-    let solution = solve::solve(settings.solver, &system, &settings.solve, progress)?;
-    timings.solve = t.elapsed().as_secs_f64();
+impl Prepared {
+    /// (Re)computes coverage, form factors and the per-element system for the current mesh.
+    fn with_factors(mut self, settings: &Settings, form_factors: bool, progress: &dyn Progress) -> Result<Prepared> {
+        let (scene, mesh, rays) = (&self.scene, &self.mesh, &self.rays);
+        let (receivers, transport, ff_stats) = if form_factors {
+            let t = Instant::now();
+            let receivers = Receivers::compute(scene, mesh, rays);
+            let (transport, mut ff_stats) =
+                form_factor::compute(scene, mesh, rays, &receivers, &settings.form_factors, progress)?;
+            ff_stats.rays += receivers.rays + self.refine_rays;
+            self.timings.form_factors += t.elapsed().as_secs_f64();
+            (receivers, Some(transport), Some(ff_stats))
+        } else {
+            (Receivers::all_open(mesh), None, None)
+        };
+        let (reflectance, emission) = element_materials(scene, mesh);
+        // Covered parts of elements neither emit nor reflect: the power formulation and the
+        // residual use the open areas.
+        self.area = receivers.open_areas(mesh);
+        self.reflectance = reflectance;
+        self.emission = emission;
+        self.receivers = receivers;
+        self.transport = transport;
+        self.ff_stats = ff_stats;
+        Ok(self)
+    }
 
-    let t = Instant::now();
-    let vertex_radiosity = reconstruct::vertex_radiosity(&scene, &mesh, &solution.display_radiosity());
-    timings.reconstruct = t.elapsed().as_secs_f64();
-    Ok(Solved { scene, mesh, rays, receivers, transport, ff_stats, solution, vertex_radiosity, timings })
+    fn solve(&self, solver: Solver, opts: &solve::Options, progress: &dyn Progress, observer: Option<&mut FrameObserver<'_>>) -> Result<Solution> {
+        let (scene, mesh) = (&self.scene, &self.mesh);
+        let mut adapter;
+        let observer: Option<&mut solve::Observer<'_>> = match observer {
+            Some(obs) => {
+                adapter = move |s: &IterationState<'_>| obs(scene, mesh, s);
+                Some(&mut adapter)
+            }
+            None => None,
+        };
+        if solver.is_stochastic() {
+            let sys = RaySystem { mesh, rays: &self.rays, reflectance: &self.reflectance, emission: &self.emission };
+            solve::stochastic::solve(solver, &sys, opts, progress, observer)
+        } else {
+            let transport = self.transport.as_ref().ok_or_else(|| Error::Invalid("solve without form factors".into()))?;
+            let sys = System { transport, reflectance: &self.reflectance, emission: &self.emission, area: &self.area };
+            solve::solve_observed(solver, &sys, opts, progress, observer)
+        }
+    }
+
+    fn finish(self, solution: Solution, solve_seconds: f64) -> Solved {
+        let mut timings = self.timings;
+        timings.solve = solve_seconds;
+        let t = Instant::now();
+        let vertex_radiosity = reconstruct::vertex_radiosity(&self.scene, &self.mesh, &solution.display_radiosity());
+        timings.reconstruct = t.elapsed().as_secs_f64();
+        Solved {
+            scene: self.scene,
+            mesh: self.mesh,
+            rays: self.rays,
+            receivers: self.receivers,
+            transport: self.transport,
+            ff_stats: self.ff_stats,
+            solution,
+            vertex_radiosity,
+            timings,
+            refinement: self.refinement,
+        }
+    }
+}
+
+/// Meshes, builds the BVH, computes form factors (not for the stochastic solvers) and
+/// solves.
+pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Solved> {
+    solve_scene_observed(scene, settings, progress, None)
+}
+
+/// [`solve_scene`], calling `observer` after solver iterations (of every adaptive pass).
+pub fn solve_scene_observed(
+    scene: Scene,
+    settings: &Settings,
+    progress: &dyn Progress,
+    mut observer: Option<&mut FrameObserver<'_>>,
+) -> Result<Solved> {
+    let stochastic = settings.solver.is_stochastic();
+    let (mut prepared, mut refiner) = prepare(scene, settings, !stochastic, progress)?;
+    let mut pass = 0;
+    let mut seconds = 0.0;
+    loop {
+        let t = Instant::now();
+        let obs: Option<&mut FrameObserver<'_>> = match observer.as_mut() {
+            Some(o) => Some(&mut **o),
+            None => None,
+        };
+        let solution = prepared.solve(settings.solver, &settings.solve, progress, obs)?;
+        seconds += t.elapsed().as_secs_f64();
+        // A posteriori: refine where the indirect light that the final gather interpolates
+        // changes fast, then recompute coverage and form factors for the new mesh.
+        if let (Some(a), Some(r), Some(transport)) = (&settings.adaptive, refiner.as_mut(), prepared.transport.as_ref()) {
+            if pass < a.passes && !progress.should_stop() {
+                pass += 1;
+                let t = Instant::now();
+                let h = indirect_irradiance(&prepared.scene, &prepared.mesh, transport, &solution);
+                let errors = mesh::adaptive::a_posteriori_errors(&prepared.scene, &prepared.mesh, &h, &solution.radiosity);
+                let stats = r.refine(&errors, a);
+                prepared.timings.mesh += t.elapsed().as_secs_f64();
+                let changed = stats.splits > 0;
+                prepared.refinement.push(stats);
+                if changed {
+                    prepared.refine_rays = prepared.ff_stats.as_ref().map_or(0, |f| f.rays);
+                    prepared.mesh = r.mesh().clone();
+                    prepared = prepared.with_factors(settings, true, progress)?;
+                    continue;
+                }
+            }
+        }
+        return Ok(prepared.finish(solution, seconds));
+    }
+}
+
+/// Indirect irradiance per element, `(F·(B − E))_i`: the light that has bounced at least
+/// once (what the final gather interpolates, and what a posteriori refinement watches).
+pub fn indirect_irradiance(scene: &Scene, mesh: &Mesh, transport: &dyn Transport, solution: &Solution) -> Vec<Rgb> {
+    let (_, emission) = element_materials(scene, mesh);
+    let b = solution.display_radiosity();
+    let reflected: Vec<Rgb> = b.iter().zip(&emission).map(|(b, e)| (*b - *e).max(Rgb::ZERO)).collect();
+    let mut h = vec![Rgb::ZERO; b.len()];
+    transport.gather(&reflected, &mut h);
+    h
+}
+
+/// One solver's run in [`solve_all`].
+#[derive(Clone, Debug)]
+pub struct SolverRun {
+    /// The solver.
+    pub solver: Solver,
+    /// Its solution, or why there is none (refused as too large, skipped after an interrupt).
+    pub outcome: std::result::Result<Solution, String>,
+}
+
+/// Every solver on one scene: the solved scene (holding the reference solution) and each
+/// solver's run.
+pub struct Comparison {
+    /// The scene with the reference solution: `direct` when it ran, else the deterministic
+    /// solution with the smallest residual.
+    pub solved: Solved,
+    /// The reference solver.
+    pub reference: Solver,
+    /// Every solver, in [`Solver::ALL`] order.
+    pub runs: Vec<SolverRun>,
+}
+
+/// Runs every solver on one scene with the same mesh, form factors and stopping rules
+/// (`settings.solver` is ignored), for comparison. After an interrupt the solver running
+/// keeps what it has and the remaining ones are skipped.
+pub fn solve_all(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Comparison> {
+    let (prepared, _) = prepare(scene, settings, true, progress)?;
+    let mut runs = Vec::new();
+    let mut seconds = 0.0;
+    for solver in Solver::ALL {
+        if progress.should_stop() {
+            runs.push(SolverRun { solver, outcome: Err("skipped: interrupted".into()) });
+            continue;
+        }
+        progress.message(&format!("solver {solver}"));
+        let t = Instant::now();
+        let outcome = match prepared.solve(solver, &settings.solve, progress, None) {
+            Ok(s) => Ok(s),
+            Err(e @ (Error::TooLarge { .. } | Error::Invalid(_))) => Err(e.to_string()),
+            Err(e) => return Err(e),
+        };
+        seconds += t.elapsed().as_secs_f64();
+        runs.push(SolverRun { solver, outcome });
+    }
+    let reference = runs
+        .iter()
+        .filter(|r| !r.solver.is_stochastic())
+        .filter_map(|r| r.outcome.as_ref().ok().map(|s| (r.solver, s)))
+        .min_by(|a, b| {
+            let rank = |(solver, s): &(Solver, &Solution)| (*solver != Solver::Direct, s.stats.residual);
+            rank(a).partial_cmp(&rank(b)).unwrap_or(std::cmp::Ordering::Equal)
+        })
+        .map(|(solver, s)| (solver, s.clone()))
+        .ok_or(Error::Cancelled)?;
+    let (reference, solution) = reference;
+    Ok(Comparison { solved: prepared.finish(solution, seconds), reference, runs })
+}
+
+impl Comparison {
+    /// The comparison table of the report.
+    pub fn rows(&self) -> Vec<ComparisonRow> {
+        let area: Vec<f64> = self.solved.mesh.elements.iter().map(|e| e.area).collect();
+        let reference = &self.solved.solution.radiosity;
+        self.runs
+            .iter()
+            .map(|r| match &r.outcome {
+                Ok(s) => {
+                    let reached = s.stats.reached(1e-3);
+                    ComparisonRow {
+                        solver: r.solver.name().to_string(),
+                        error: None,
+                        seconds_to_1e3: reached.map(|x| x.0),
+                        sweeps_to_1e3: reached.map(|x| x.1),
+                        difference_from_reference: Some(solve::relative_difference(&area, &s.radiosity, reference)),
+                        energy_imbalance: Some(s.energy.relative_imbalance()),
+                        stats: Some(s.stats.clone()),
+                    }
+                }
+                Err(e) => ComparisonRow {
+                    solver: r.solver.name().to_string(),
+                    error: Some(e.clone()),
+                    seconds_to_1e3: None,
+                    sweeps_to_1e3: None,
+                    difference_from_reference: None,
+                    energy_imbalance: None,
+                    stats: None,
+                },
+            })
+            .collect()
+    }
+
+    /// The report: the reference solution's, with the comparison table.
+    pub fn report(&self) -> Report {
+        let mut report = self.solved.report();
+        report.reference_solver = Some(self.reference.name().to_string());
+        report.comparison = self.rows();
+        report.rays_cast += self
+            .runs
+            .iter()
+            .filter(|r| r.solver != self.reference)
+            .filter_map(|r| r.outcome.as_ref().ok())
+            .map(|s| s.stats.rays)
+            .sum::<u64>();
+        report
+    }
+}
+
+/// Draws element radiosity `element_b` (display values) from `camera`: per-vertex
+/// reconstruction, then Gouraud (or flat) rendering — what [`Solved::render`] does, for
+/// any radiosity vector (the frames of `render --frames`).
+pub fn render_radiosity(
+    scene: &Scene,
+    mesh: &Mesh,
+    tracer: &ElementTracer,
+    element_b: &[Rgb],
+    camera: &Camera,
+    opts: &gouraud::Options,
+    progress: &dyn Progress,
+) -> Image {
+    let cam = PinholeCamera::new(camera, opts.width, opts.height);
+    let vertex_b = reconstruct::vertex_radiosity(scene, mesh, element_b);
+    gouraud::render(mesh, tracer, element_b, &vertex_b, &cam, opts, progress)
 }
 
 impl Solved {
-    /// Per-object area-averaged radiosity and radiance.
+    /// Per-object area-averaged radiosity and radiance (front side; back side too for
+    /// two-sided objects). Covered parts of elements count as zero.
     pub fn objects(&self) -> Vec<ObjectReport> {
-        let means = reconstruct::object_means(&self.scene, &self.mesh, &self.solution.radiosity, &self.receivers.open_fraction);
+        let means =
+            reconstruct::object_means(&self.scene, &self.mesh, &self.solution.radiosity, &self.receivers.open_fraction);
         let mut counts = vec![0usize; self.scene.objects.len()];
         let mut mats: Vec<Vec<String>> = vec![Vec::new(); self.scene.objects.len()];
         for e in &self.mesh.elements {
@@ -169,44 +470,32 @@ impl Solved {
             .collect()
     }
 
-    /// Energy bookkeeping: emitted = absorbed + escaped + unaccounted.
-    pub fn energy(&self) -> EnergyReport {
-        let (rho, emission) = element_materials(&self.scene, &self.mesh);
-        let b = &self.solution.radiosity;
-        let mut fb = vec![Rgb::ZERO; b.len()];
-        self.transport.gather(b, &mut fb);
-        let mut emitted = Rgb::ZERO;
-        let mut absorbed = Rgb::ZERO;
-        let mut leaving = Rgb::ZERO;
-        let mut arriving = Rgb::ZERO;
-        let area = self.receivers.open_areas(&self.mesh);
-        for i in 0..self.mesh.len() {
-            let a = area[i];
-            emitted += emission[i] * a;
-            // Irradiance H_i = Σ_j F_ij B_j (gather form); absorbed = A (1−ρ) H.
-            absorbed += (Rgb::ONE - rho[i]) * fb[i] * a;
-            leaving += b[i] * a;
-            arriving += fb[i] * a;
-        }
-        // Power that leaves surfaces but never arrives anywhere escapes through openings.
-        let escaped = leaving - arriving;
-        let unaccounted = emitted - absorbed - escaped;
-        EnergyReport {
-            emitted: emitted.to_array(),
-            absorbed: absorbed.to_array(),
-            escaped: escaped.to_array(),
-            unaccounted: unaccounted.to_array(),
-        }
-    }
-
-    /// Indirect irradiance per element, `(F·(B − E))_i` — light that has bounced at least
-    /// once — and its per-vertex reconstruction (for the final gather).
+    /// Indirect irradiance per element — light that has bounced at least once — and its
+    /// per-vertex reconstruction (for the final gather). With form factors it is
+    /// `(F·(B − E))_i`; without (stochastic solvers) it is `(B − E)/ρ` minus the direct
+    /// irradiance sampled at the element's receiver point.
     pub fn indirect_irradiance(&self) -> (Vec<Rgb>, Vec<Rgb>) {
-        let (_, emission) = element_materials(&self.scene, &self.mesh);
+        let (rho, emission) = element_materials(&self.scene, &self.mesh);
         let b = self.solution.display_radiosity();
-        let reflected: Vec<Rgb> = b.iter().zip(&emission).map(|(b, e)| (*b - *e).max(Rgb::ZERO)).collect();
-        let mut h = vec![Rgb::ZERO; b.len()];
-        self.transport.gather(&reflected, &mut h);
+        let h: Vec<Rgb> = match &self.transport {
+            Some(f) => indirect_irradiance(&self.scene, &self.mesh, f, &self.solution),
+            None => {
+                let ems = gather::emitters(&self.scene);
+                let mut rng = crate::sampling::rng_for(0x1d1, 0);
+                let mut pts = Vec::new();
+                (0..b.len())
+                    .map(|i| {
+                        let e = &self.mesh.elements[i];
+                        let Some(&x) = self.receivers.points(i, 1).first() else { return Rgb::ZERO };
+                        let total = ((b[i] - emission[i]) / rho[i].max(Rgb::splat(1e-6))).max(Rgb::ZERO);
+                        crate::sampling::stratified(4, &mut rng, &mut pts);
+                        let (hd, _) =
+                            gather::direct_irradiance(&self.scene, &self.rays, &ems, x, e.normal, e.patch, |_| &pts);
+                        (total - hd).max(Rgb::ZERO)
+                    })
+                    .collect()
+            }
+        };
         let hv = reconstruct::vertex_radiosity(&self.scene, &self.mesh, &h);
         (h, hv)
     }
@@ -226,6 +515,12 @@ impl Solved {
         gather::render(&self.scene, &self.mesh, &self.rays, tracer, indirect_vertex, &cam, opts, progress)
     }
 
+    /// Energy bookkeeping: emitted = absorbed + escaped + unshot (see
+    /// [`solve::EnergyBalance`]).
+    pub fn energy(&self) -> EnergyReport {
+        EnergyReport::from(&self.solution.energy)
+    }
+
     /// Renders one view with Gouraud (or flat) shading.
     pub fn render(&self, camera: &Camera, opts: &gouraud::Options, tracer: &ElementTracer, progress: &dyn Progress) -> Image {
         let cam = PinholeCamera::new(camera, opts.width, opts.height);
@@ -242,17 +537,18 @@ impl Solved {
             patches: self.scene.polygons.len(),
             elements: self.mesh.len(),
             mesh_size: self.mesh.target_size,
-            form_factors: Some(self.ff_stats.clone()),
+            form_factors: self.ff_stats.clone(),
             solver: Some(s.clone()),
             iterations: s.iterations,
             residual: s.residual,
-            rays_cast: self.ff_stats.rays,
+            rays_cast: self.ff_stats.as_ref().map_or(0, |f| f.rays) + s.rays,
             energy: Some(self.energy()),
             timings: self.timings.clone(),
             objects: self.objects(),
             images: Vec::new(),
-            views: Vec::new(),
             warnings: self.scene.warnings.iter().map(|w| w.to_string()).collect(),
+            refinement: self.refinement.clone(),
+            ..Default::default()
         }
     }
 }

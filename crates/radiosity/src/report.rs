@@ -3,7 +3,7 @@
 use serde::Serialize;
 
 use crate::form_factor;
-use crate::solve::SolveStats;
+use crate::solve::{EnergyBalance, SolveStats};
 
 /// Per-object result.
 #[derive(Clone, Debug, Serialize)]
@@ -50,17 +50,54 @@ pub struct Timings {
     pub total: f64,
 }
 
-/// Energy bookkeeping (power = Σ A·B, per channel, scene units).
+/// Energy bookkeeping (power per RGB channel, scene units): emitted = absorbed + escaped +
+/// unshot, in the formulation of the solver that produced it ([`EnergyBalance`]).
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct EnergyReport {
     /// Emitted power Σ A_i E_i.
     pub emitted: [f64; 3],
-    /// Absorbed power Σ A_i (1−ρ_i)/ρ_i · (B_i − E_i) ... see `pipeline`.
+    /// Absorbed by the surfaces.
     pub absorbed: [f64; 3],
-    /// Power leaving through openings (open scenes).
+    /// Left through openings (open scenes) or onto the back of one-sided surfaces.
     pub escaped: [f64; 3],
-    /// Not yet distributed (unconverged part).
-    pub unaccounted: [f64; 3],
+    /// Received but not yet passed on (unshot power; for gathering solvers the residual).
+    pub unshot: [f64; 3],
+    /// max over channels of |emitted − absorbed − escaped − unshot| / emitted.
+    pub imbalance: f64,
+}
+
+impl From<&EnergyBalance> for EnergyReport {
+    fn from(e: &EnergyBalance) -> Self {
+        EnergyReport {
+            emitted: e.emitted.to_array(),
+            absorbed: e.absorbed.to_array(),
+            escaped: e.escaped.to_array(),
+            unshot: e.unshot.to_array(),
+            imbalance: e.relative_imbalance(),
+        }
+    }
+}
+
+/// One solver's line in the comparison of `solve --solver all`.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ComparisonRow {
+    /// Solver name.
+    pub solver: String,
+    /// Why it has no result (refused as too large, skipped), if so.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// Solver seconds until the residual was first at most 1e-3.
+    #[serde(rename = "seconds_to_residual_1e-3")]
+    pub seconds_to_1e3: Option<f64>,
+    /// Sweeps (progressive refinement: shots / n) until then.
+    #[serde(rename = "sweeps_to_residual_1e-3")]
+    pub sweeps_to_1e3: Option<f64>,
+    /// Relative RMS difference of B from the reference solution (area-weighted luminance).
+    pub difference_from_reference: Option<f64>,
+    /// Relative energy imbalance (see [`EnergyReport::imbalance`]).
+    pub energy_imbalance: Option<f64>,
+    /// Iterations, residual, time, rays and history.
+    pub stats: Option<SolveStats>,
 }
 
 /// One rendered view.
@@ -111,4 +148,13 @@ pub struct Report {
     pub views: Vec<ViewReport>,
     /// Warnings.
     pub warnings: Vec<String>,
+    /// `solve --solver all`: the solver whose solution the report holds.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_solver: Option<String>,
+    /// `solve --solver all`: every solver on this scene.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub comparison: Vec<ComparisonRow>,
+    /// Adaptive mesh refinement, pass by pass (absent for a uniform mesh).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub refinement: Vec<crate::mesh::adaptive::PassStats>,
 }

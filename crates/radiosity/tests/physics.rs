@@ -60,7 +60,7 @@ fn furnace_box_radiosity_is_e_over_one_minus_rho() {
     }
     // Closed and unoccluded: every row sums to one.
     for i in 0..solved.mesh.len() {
-        let s = solved.transport.row_sum(i);
+        let s = solved.transport.as_ref().unwrap().row_sum(i);
         assert!((s - 1.0).abs() < 1e-5, "row {i} sums to {s}");
     }
     // Energy balance closes: nothing escapes a closed box.
@@ -68,6 +68,24 @@ fn furnace_box_radiosity_is_e_over_one_minus_rho() {
     for c in 0..3 {
         assert!(e.escaped[c].abs() <= 1e-5 * e.emitted[c], "{e:?}");
         assert!((e.emitted[c] - e.absorbed[c] - e.escaped[c]).abs() <= 1e-4 * e.emitted[c], "{e:?}");
+    }
+}
+
+#[test]
+fn furnace_box_with_adaptive_meshing_is_not_refined_and_stays_exact() {
+    // Uniformly lit: neither the a priori (direct light) nor the a posteriori (indirect
+    // light) estimate finds anything to refine, and the answer stays exact.
+    let scene = Scene::from_desc(builtin::furnace(0.5, 1.0)).unwrap();
+    let adaptive = radiosity::mesh::adaptive::Options { passes: 1, ..Default::default() };
+    let mut settings = Settings { mesh_size: Some(0.2), adaptive: Some(adaptive), ..Default::default() };
+    settings.solve.tolerance = 1e-12;
+    let solved = solve_scene(scene, &settings, &NoProgress).unwrap();
+    assert_eq!(solved.refinement.len(), 2, "{:?}", solved.refinement);
+    assert!(solved.refinement.iter().all(|p| p.splits == 0 && p.over_threshold == 0), "{:?}", solved.refinement);
+    assert_eq!(solved.mesh.len(), 6 * 25);
+    let expect = std::f64::consts::PI * 1.0 / (1.0 - 0.5);
+    for b in &solved.solution.radiosity {
+        assert!((*b - Rgb::splat(expect)).abs().max_element() <= 1e-6 * expect, "{b} vs {expect}");
     }
 }
 

@@ -1,10 +1,12 @@
 //! Stage 3: visibility — ray casting against all triangles of the scene.
 //!
-//! [`Bvh`] is our own bounding volume hierarchy (the article's BSP tree, modernised): a
-//! binned SAH build (Wald 2007, "On fast construction of SAH-based bounding volume
-//! hierarchies") and stack-based ordered traversal with closest-hit and any-hit queries.
+//! [`Bvh`] is our own bounding volume hierarchy (the article's BSP tree, modernised): an
+//! 8-wide BVH built by binned SAH (Wald 2007, "On fast construction of SAH-based bounding
+//! volume hierarchies"), traversed one ray at a time with SIMD box and triangle tests
+//! (Wald, Benthin & Boulos 2008; Ernst & Greiner 2008), closest-hit and any-hit queries.
 //! Pure-Rust BVH crates were measured 5–30× slower than Embree on incoherent rays here, so
-//! this piece is ours (see BENCHMARKS.md).
+//! this piece is ours; `radiosity bench rays` measures it against Embree on the same rays
+//! (see BENCHMARKS.md).
 //!
 //! Robustness against self-intersection at shared edges is handled by the callers through
 //! per-triangle ids: a visibility query between two surface points ignores the triangles of
@@ -14,5 +16,5 @@
 pub mod bvh;
 mod scene_rays;
 
-pub use bvh::{Bvh, Hit, Ray};
-pub use scene_rays::SceneRays;
+pub use bvh::{Bvh, BvhStats, Hit, Ray};
+pub use scene_rays::{SceneRays, SEGMENT_EPS};

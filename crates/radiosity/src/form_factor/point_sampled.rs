@@ -36,9 +36,9 @@ impl<'a> Rows<'a> {
     }
 }
 
-/// Visibility points, the row with far flags, the patch the list is for, its facing
+/// Visibility points, the row (column, factor, far, far weight), the patch the list is for, its facing
 /// patches.
-pub(crate) type Scratch = (Vec<(f64, f64)>, Vec<(u32, f64, bool)>, u32, Vec<u32>);
+pub(crate) type Scratch = (Vec<(f64, f64)>, Vec<(u32, f64, bool, f64)>, u32, Vec<u32>);
 
 impl RowSource for Rows<'_> {
     type Scratch = Scratch;
@@ -141,7 +141,7 @@ impl RowSource for Rows<'_> {
                     if f1 > 0.0 {
                         approx_far_q += f1;
                         let v = visibility(c1, j, q, &mut rng, &mut nrays);
-                        row.push((j, f1 * v, true));
+                        row.push((j, f1 * v, true, (size_i / d.max(1e-300)).powi(2)));
                     }
                     continue;
                 }
@@ -160,7 +160,7 @@ impl RowSource for Rows<'_> {
                 let m = recv_pts.len() as f64;
                 near_excess += unocc / m - f1;
                 if sum > 0.0 {
-                    row.push((j, sum / m, false));
+                    row.push((j, sum / m, false, 0.0));
                 }
             }
             if big && approx_far_q > 0.0 {
@@ -174,14 +174,37 @@ impl RowSource for Rows<'_> {
                 far_sum += approx_far_q;
             }
         }
-        let mut alpha = if far_sum > 0.0 { (1.0 - near_excess / far_sum).clamp(0.5, 1.5) } else { 1.0 };
-        // With occlusion the correction is estimated from unoccluded values; never let
-        // it push a row above one (no point sees more than its hemisphere).
-        let (near_vis, far_vis) = row.iter().fold((0.0, 0.0), |(n, f), &(_, v, far)| if far { (n, f + v) } else { (n + v, f) });
-        if near_vis + alpha * far_vis > 1.0 && far_vis > 0.0 {
-            alpha = ((1.0 - near_vis) / far_vis).max(0.0);
+        // The excess D is taken from the far field in proportion to F_ij·(s_i/d_ij)²:
+        // the difference between an element's mean and its centroid value is a
+        // second-order term, so nearer parts of the far field give it up and a
+        // distant light barely does (a uniform scale would dim direct light near
+        // every corner).
+        let _ = far_sum;
+        let wsum: f64 = row.iter().filter(|e| e.2).map(|e| e.1 * e.3).sum();
+        let near_vis: f64 = row.iter().filter(|e| !e.2).map(|e| e.1).sum();
+        let far_vis: f64 = row.iter().filter(|e| e.2).map(|e| e.1).sum();
+        let scale_far = |e: &(u32, f64, bool, f64)| -> f64 {
+            if !e.2 {
+                return e.1;
+            }
+            if wsum > 0.0 {
+                e.1 * (1.0 - near_excess * e.3 / wsum).clamp(0.0, 2.0)
+            } else {
+                e.1
+            }
+        };
+        let start = out.len();
+        out.extend(row.iter().map(|e| (e.0, scale_far(e))).filter(|e| e.1 > 0.0));
+        // Never let the correction push a row above one (no point sees more than its
+        // hemisphere).
+        let total: f64 = out[start..].iter().map(|e| e.1).sum();
+        if total > 1.0 && far_vis > 0.0 {
+            let k = ((1.0 - near_vis) / (total - near_vis)).max(0.0);
+            let near: std::collections::HashSet<u32> = row.iter().filter(|e| !e.2).map(|e| e.0).collect();
+            for e in out[start..].iter_mut().filter(|e| !near.contains(&e.0)) {
+                e.1 *= k;
+            }
         }
-        out.extend(row.iter().map(|&(j, f, far)| (j, if far { f * alpha } else { f })).filter(|e| e.1 > 0.0));
         nrays
     }
 }

@@ -33,7 +33,9 @@ pub fn count_uniform(scene: &Scene, size: f64) -> u64 {
 }
 
 /// Subdivides every polygon of `scene` into elements no larger than `size` (scene units)
-/// along any edge. `size <= 0` or non-finite leaves each polygon whole (one element per
+/// along any edge of a quadrilateral, and no longer than `size·√2` (the diagonal of a
+/// `size × size` square) along any edge of a triangle: a right triangle cut to `size` along
+/// its hypotenuse would get four times the elements of the square it is half of. `size <= 0` or non-finite leaves each polygon whole (one element per
 /// triangle/quad, fans for larger polygons).
 pub fn mesh_uniform(scene: &Scene, size: f64) -> Mesh {
     let size = if size.is_finite() && size > 0.0 { size } else { f64::INFINITY };
@@ -62,7 +64,9 @@ pub fn mesh_uniform(scene: &Scene, size: f64) -> Mesh {
                 let (a, bb, c) = (v[0], v[k], v[k + 1]);
                 longest = longest.max((bb - a).length()).max((c - bb).length()).max((a - c).length());
             }
-            let k = steps(longest);
+            // A quad element's longest extent is its diagonal, size·√2; give triangle
+            // elements the same.
+            let k = steps(longest / std::f64::consts::SQRT_2);
             for f in 1..v.len() - 1 {
                 let (a, e1, e2) = (v[0], v[f] - v[0], v[f + 1] - v[0]);
                 let p = |i: usize, j: usize| a + e1 * (i as f64 / k as f64) + e2 * (j as f64 / k as f64);
@@ -121,7 +125,7 @@ impl PatchBuilder<'_> {
 }
 
 /// Rounds to ~40 significant bits so that points equal up to rounding share a key.
-fn round_key(x: f64) -> u64 {
+pub(super) fn round_key(x: f64) -> u64 {
     let b = (x + 0.0).to_bits(); // +0.0 folds -0.0 into 0.0
     (b + (1 << 11)) >> 12
 }
@@ -154,7 +158,7 @@ mod tests {
         let mesh = mesh_uniform(&scene, 100.0);
         let pe = mesh.patches[tri_patch];
         let k = (scene.polygons[tri_patch].vertices.windows(2).map(|w| (w[1] - w[0]).length()).fold(0.0, f64::max)
-            / 100.0)
+            / (100.0 * std::f64::consts::SQRT_2))
             .ceil() as u32;
         assert!(pe.count >= k * k);
         for e in &mesh.elements[pe.first as usize..(pe.first + pe.count) as usize] {

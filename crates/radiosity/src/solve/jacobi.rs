@@ -1,47 +1,37 @@
 //! Jacobi iteration (gathering): `B⁽ᵏ⁺¹⁾ = E + ρ·F·B⁽ᵏ⁾`, starting from `B⁽⁰⁾ = E`.
 //!
 //! After iteration k, B holds exactly the light that has bounced at most k times — the
-//! "light flowing into the scene" sequence. Converges because ρ < 1 and row sums ≤ 1
-//! (Cohen & Wallace 1993, §5.3).
+//! "light flowing into the scene" sequence: iteration 1 lights only what the emitters see.
+//! Converges because ρ < 1 and row sums ≤ 1 (Cohen & Wallace 1993, §5.3). Needs only
+//! [`Transport::gather`](crate::transport::Transport::gather), so it runs on any operator;
+//! the product that updates B also gives the residual of the current iterate.
 
-use super::{Clock, IterationRecord, Options, Solution, SolveStats, StopReason, System};
-use crate::{Progress, Result, Rgb};
+use std::borrow::Cow;
 
-pub(super) fn solve(sys: &System, opts: &Options, clock: &Clock, progress: &dyn Progress) -> Result<Solution> {
+use super::{energy_gathering, Monitor, Solution, System};
+use crate::{Result, Rgb};
+
+pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
     let n = sys.len();
     let mut b: Vec<Rgb> = sys.emission.to_vec();
     let mut fb = vec![Rgb::ZERO; n];
-    let mut history = Vec::new();
-    let mut residual;
     let mut it = 0;
-    let stop = loop {
+    let (stop, residual) = loop {
         sys.transport.gather(&b, &mut fb);
         // The residual of the current iterate B⁽ⁱᵗ⁾, from the same product.
-        residual = sys.residual_with(&b, &fb);
+        let residual = sys.residual_with(&b, &fb);
         if it > 0 {
-            history.push(IterationRecord { iteration: it, residual, seconds: clock.seconds() });
-            progress.message(&format!("jacobi iteration {it}: residual {residual:.3e}"));
+            mon.record(it, it as f64, residual);
+            mon.observe(it, residual, || Cow::Borrowed(&b));
         }
-        if residual <= opts.tolerance {
-            break StopReason::Converged;
-        }
-        if it >= opts.max_iterations {
-            break StopReason::MaxIterations;
-        }
-        if progress.should_stop() {
-            break StopReason::Interrupted;
-        }
-        if clock.over_budget() {
-            break StopReason::TimeBudget;
+        if let Some(stop) = mon.check(it, residual) {
+            break (stop, residual);
         }
         for i in 0..n {
             b[i] = sys.emission[i] + sys.reflectance[i] * fb[i];
         }
         it += 1;
     };
-    Ok(Solution {
-        radiosity: b,
-        ambient: None,
-        stats: SolveStats { solver: "jacobi".into(), iterations: it, residual, stop, seconds: clock.seconds(), history },
-    })
+    let energy = energy_gathering(sys, &b, None);
+    Ok(Solution { radiosity: b, ambient: None, energy, stats: mon.finish(it, residual, stop, None) })
 }

@@ -1,22 +1,54 @@
 //! Stage 5: solving `B = E + ρ·F·B` for the radiosity `B` of every element, per RGB channel.
 //!
-//! Every solver is a runtime choice ([`Solver`]), works on any [`Transport`], reports its
-//! residual after every iteration, and stops on a tolerance, an iteration cap, a time budget
-//! or an interrupt ([`Progress::should_stop`]) — keeping the best solution so far.
+//! Every solver is a runtime choice ([`Solver`]), one file per method, and each reports its
+//! convergence after every iteration, stops on a tolerance, an iteration cap, a time budget
+//! or an interrupt ([`Progress::should_stop`]) and keeps the best solution so far:
 //!
-//! Residual: the relative power residual
-//! `Σ_i A_i·lum|E_i + ρ_i (F B)_i − B_i| / Σ_i A_i·lum(E_i)`, i.e. the fraction of the
-//! emitted power not yet accounted for. Progressive refinement reports its unshot power
-//! `Σ_i A_i·lum(ΔB_i) / Σ_i A_i·lum(E_i)`, which bounds the same quantity.
+//! | name | file | iteration | paper |
+//! |---|---|---|---|
+//! | `direct` | `direct.rs` | LU of `I − ρF` (dense, faer) | — |
+//! | `jacobi` | `jacobi.rs` | gathering, iteration k = k bounces | Cohen & Wallace 1993 §5.3 |
+//! | `gauss-seidel` | `gauss_seidel.rs` | gathering with updated values | Cohen & Greenberg 1985 |
+//! | `shooting` | `shooting.rs` | every element shoots its unshot power per sweep (power formulation) | Cohen et al. 1988 |
+//! | `progressive` | `progressive.rs` | shoot the largest unshot power (Southwell) + ambient | Cohen et al. 1988 |
+//! | `stochastic-jacobi` | `stochastic_jacobi.rs` | Jacobi with rays, no form factors | Neumann et al. 1994 |
+//! | `stochastic-shooting` | `stochastic_shooting.rs` | incremental shooting with rays | Bekaert 1999 |
+//!
+//! The deterministic solvers work on a [`System`] (any [`Transport`]); the stochastic ones
+//! never store form factors and need the geometry instead: [`stochastic::solve`].
+//!
+//! **Residual.** Gathering solvers report the relative power residual
+//! `Σ_i A_i·lum|E_i + ρ_i (F B)_i − B_i| / Σ_i A_i·lum(E_i)`: the fraction of the emitted
+//! power the next Jacobi step would still add. Shooting solvers report their unshot power
+//! `Σ_i A_i·lum(ΔB_i) / Σ_i A_i·lum(E_i)`, which bounds the same quantity (the residual of
+//! a shooting iterate is `ρ·F·ΔB`, whose power is at most that of `ΔB`). Both are 1 for
+//! `B = 0` and fall to 0, so one tolerance means the same thing for every solver.
+//!
+//! **Energy.** Every [`Solution`] carries its [`EnergyBalance`]: emitted = absorbed +
+//! escaped + unshot, computed in the formulation the solver uses (see [`EnergyBalance`]).
+//!
+//! **Observing.** [`solve_observed`] calls an observer after every iteration (every bounce;
+//! for progressive refinement after 1, 2, 4 … shots and then every `n` shots) with the
+//! current display radiosity, so that a program can draw light flowing into the scene.
+//! Time spent in the observer is not counted in the solver's timings or time budget.
 
+mod direct;
+mod gauss_seidel;
 mod jacobi;
 mod progressive;
+mod shooting;
+pub mod stochastic;
+mod stochastic_jacobi;
+mod stochastic_shooting;
 
+use std::borrow::Cow;
 use std::str::FromStr;
 use std::time::{Duration, Instant};
 
-use crate::transport::Transport;
+use crate::transport::{SparseRows, Transport};
 use crate::{luminance, Error, Progress, Result, Rgb};
+
+pub use stochastic::RaySystem;
 
 /// The linear system to solve.
 pub struct System<'a> {
@@ -58,28 +90,68 @@ impl System<'_> {
         self.transport.gather(b, &mut fb);
         self.residual_with(b, &fb)
     }
+    /// The explicit rows of `F`, or an error naming the solver that needs them.
+    fn rows(&self, solver: Solver) -> Result<&SparseRows> {
+        self.transport.rows().ok_or_else(|| {
+            Error::Invalid(format!("the {} solver needs a transport operator with explicit rows", solver.name()))
+        })
+    }
 }
 
 /// A solver.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Solver {
+    /// Direct solution `B = (I − ρF)⁻¹E` by LU factorisation (small systems only).
+    Direct,
     /// Jacobi iteration (gathering): iteration k holds k bounces of light.
     Jacobi,
+    /// Gauss–Seidel iteration (gathering, updated values used at once).
+    GaussSeidel,
+    /// Shooting in the power formulation: each sweep, every element sends its unshot power.
+    Shooting,
     /// Progressive refinement: shoot the element with the largest unshot power
     /// (Cohen, Chen, Wallace & Greenberg 1988).
     Progressive,
+    /// Stochastic Jacobi: power distributed by rays, no form factors (Neumann et al. 1994).
+    StochasticJacobi,
+    /// Stochastic incremental shooting: unshot power distributed by rays (Bekaert 1999).
+    StochasticShooting,
 }
 
 impl Solver {
-    /// Every solver.
-    pub const ALL: [Solver; 2] = [Solver::Jacobi, Solver::Progressive];
+    /// Every solver, in documentation order.
+    pub const ALL: [Solver; 7] = [
+        Solver::Direct,
+        Solver::Jacobi,
+        Solver::GaussSeidel,
+        Solver::Shooting,
+        Solver::Progressive,
+        Solver::StochasticJacobi,
+        Solver::StochasticShooting,
+    ];
     /// The command-line name.
     pub fn name(self) -> &'static str {
         match self {
+            Solver::Direct => "direct",
             Solver::Jacobi => "jacobi",
+            Solver::GaussSeidel => "gauss-seidel",
+            Solver::Shooting => "shooting",
             Solver::Progressive => "progressive",
+            Solver::StochasticJacobi => "stochastic-jacobi",
+            Solver::StochasticShooting => "stochastic-shooting",
         }
+    }
+    /// True for the Monte Carlo solvers, which need geometry ([`stochastic::solve`]) and no
+    /// form factors.
+    pub fn is_stochastic(self) -> bool {
+        matches!(self, Solver::StochasticJacobi | Solver::StochasticShooting)
+    }
+}
+
+impl std::fmt::Display for Solver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -93,21 +165,38 @@ impl FromStr for Solver {
     }
 }
 
-/// When to stop.
+/// The default memory limit of the direct solver: 2 GiB (a 16 384-element dense matrix).
+pub const DIRECT_MEMORY_LIMIT: u64 = 2 << 30;
+
+/// When to stop, and the solvers' own settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Options {
-    /// Stop once the relative power residual is at most this.
+    /// Stop once the relative power residual (or unshot power) is at most this.
     pub tolerance: f64,
-    /// Stop after this many iterations (Jacobi sweeps; for progressive refinement, shots
-    /// are counted in units of `n` shots).
+    /// Stop after this many iterations (sweeps or bounces; for progressive refinement,
+    /// shots are counted in units of `n` shots).
     pub max_iterations: usize,
-    /// Stop after this much time.
+    /// Stop after this much solver time.
     pub time_budget: Option<Duration>,
+    /// Seed of the stochastic solvers; their results do not depend on the thread count.
+    pub seed: u64,
+    /// Stochastic solvers: rays per iteration for the full emitted power (None: 500 per
+    /// element, at least 200 000).
+    pub rays: Option<u64>,
+    /// Direct solver: refuse systems whose dense matrix needs more bytes than this.
+    pub direct_memory_limit: u64,
 }
 
 impl Default for Options {
     fn default() -> Self {
-        Options { tolerance: 1e-4, max_iterations: 1000, time_budget: None }
+        Options {
+            tolerance: 1e-4,
+            max_iterations: 1000,
+            time_budget: None,
+            seed: 0,
+            rays: None,
+            direct_memory_limit: DIRECT_MEMORY_LIMIT,
+        }
     }
 }
 
@@ -115,7 +204,7 @@ impl Default for Options {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum StopReason {
-    /// The residual reached the tolerance.
+    /// The residual reached the tolerance (or, for stochastic Jacobi, its noise level).
     Converged,
     /// The iteration cap was reached.
     MaxIterations,
@@ -128,12 +217,72 @@ pub enum StopReason {
 /// One iteration's record.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct IterationRecord {
-    /// 1-based iteration number.
+    /// 1-based iteration number (progressive refinement: shots).
     pub iteration: usize,
+    /// The same in sweeps: `iteration`, or shots / n for progressive refinement.
+    pub sweeps: f64,
     /// Relative residual (or unshot power) after it.
     pub residual: f64,
-    /// Seconds since the solve started.
+    /// Solver seconds since the solve started.
     pub seconds: f64,
+    /// Rays cast by the solver so far (stochastic solvers).
+    pub rays: u64,
+}
+
+/// The current state, handed to an observer after an iteration.
+#[derive(Clone, Copy, Debug)]
+pub struct IterationState<'a> {
+    /// The solver.
+    pub solver: Solver,
+    /// 1-based iteration number (progressive refinement: shots).
+    pub iteration: usize,
+    /// Relative residual (or unshot power).
+    pub residual: f64,
+    /// Solver seconds so far.
+    pub seconds: f64,
+    /// Rays cast so far.
+    pub rays: u64,
+    /// Radiosity per element for display (with the ambient term for progressive
+    /// refinement), same units as E.
+    pub radiosity: &'a [Rgb],
+}
+
+/// Called after iterations (see the module docs).
+pub type Observer<'a> = dyn FnMut(&IterationState<'_>) + 'a;
+
+/// Energy bookkeeping of a solution, power per RGB channel (W or scene units):
+/// `emitted = absorbed + escaped + unshot`.
+///
+/// With `S` the radiosity already passed on ("shot") and `ΔB = B − S` the part still to pass
+/// on, the power arriving at the elements is `H = F·S` (gathering solvers, rows of F) or
+/// `P_i = Σ_j A_j S_j F_ji` (power formulation, senders' rows); the absorbed power is
+/// `Σ (1−ρ_i)·arriving_i`, the escaped power is what was shot but arrived nowhere (through
+/// openings, or onto the back of one-sided surfaces), and the unshot power is `Σ A_i ΔB_i`.
+/// Gathering solvers (direct, Jacobi, Gauss–Seidel) shoot all of `B` and count their
+/// residual `E + ρFB − B` as unshot; progressive refinement and shooting count their
+/// unshot radiosity; the stochastic solvers count what their rays carried.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EnergyBalance {
+    /// Emitted power Σ A_i E_i.
+    pub emitted: Rgb,
+    /// Absorbed by the surfaces.
+    pub absorbed: Rgb,
+    /// Left the scene (openings, back faces of one-sided surfaces).
+    pub escaped: Rgb,
+    /// Received but not yet passed on (the unconverged part).
+    pub unshot: Rgb,
+}
+
+impl EnergyBalance {
+    /// `emitted − absorbed − escaped − unshot`: zero up to rounding when the books close.
+    pub fn imbalance(&self) -> Rgb {
+        self.emitted - self.absorbed - self.escaped - self.unshot
+    }
+    /// The largest channel of |imbalance| relative to the emitted power of that channel.
+    pub fn relative_imbalance(&self) -> f64 {
+        let d = self.imbalance().abs();
+        (0..3).map(|c| if self.emitted[c] > 0.0 { d[c] / self.emitted[c] } else { d[c] }).fold(0.0, f64::max)
+    }
 }
 
 /// The result of a solve.
@@ -144,6 +293,8 @@ pub struct Solution {
     /// For progressive refinement: the ambient term (per element, ρ_i·ambient) that
     /// estimates the light not yet shot; added for display only.
     pub ambient: Option<Vec<Rgb>>,
+    /// Energy bookkeeping.
+    pub energy: EnergyBalance,
     /// Statistics.
     pub stats: SolveStats,
 }
@@ -163,40 +314,254 @@ impl Solution {
 pub struct SolveStats {
     /// Solver name.
     pub solver: String,
-    /// Iterations done.
+    /// Iterations done (progressive refinement: shots).
     pub iterations: usize,
     /// Final relative residual (see module docs).
     pub residual: f64,
     /// Why it stopped.
     pub stop: StopReason,
-    /// Wall-clock seconds.
+    /// Solver seconds (wall clock, observer time excluded).
     pub seconds: f64,
+    /// Rays cast (stochastic solvers).
+    pub rays: u64,
+    /// Stochastic solvers: estimated relative RMS error of B (area-weighted luminance),
+    /// from the spread of independent replicas.
+    pub error_estimate: Option<f64>,
     /// Per-iteration history.
     pub history: Vec<IterationRecord>,
 }
 
-/// Solves `system` with `solver`.
+impl SolveStats {
+    /// The first recorded time (seconds) and sweeps at which the residual was at most
+    /// `level`, if it got there.
+    pub fn reached(&self, level: f64) -> Option<(f64, f64)> {
+        self.history.iter().find(|r| r.residual <= level).map(|r| (r.seconds, r.sweeps))
+    }
+}
+
+/// Solves `system` with a deterministic `solver`.
 pub fn solve(solver: Solver, system: &System, opts: &Options, progress: &dyn Progress) -> Result<Solution> {
-    if system.transport.len() != system.len() || system.reflectance.len() != system.len() || system.area.len() != system.len() {
+    solve_observed(solver, system, opts, progress, None)
+}
+
+/// Solves `system` with a deterministic `solver`, calling `observer` after iterations.
+pub fn solve_observed(
+    solver: Solver,
+    system: &System,
+    opts: &Options,
+    progress: &dyn Progress,
+    observer: Option<&mut Observer<'_>>,
+) -> Result<Solution> {
+    let n = system.len();
+    if system.transport.len() != n || system.reflectance.len() != n || system.area.len() != n {
         return Err(Error::Invalid("solve: system sizes disagree".into()));
     }
-    let clock = Clock { start: Instant::now(), budget: opts.time_budget };
+    let mut mon = Monitor::new(solver, opts, progress, observer);
     match solver {
-        Solver::Jacobi => jacobi::solve(system, opts, &clock, progress),
-        Solver::Progressive => progressive::solve(system, opts, &clock, progress),
+        Solver::Direct => direct::solve(system, &mut mon),
+        Solver::Jacobi => jacobi::solve(system, &mut mon),
+        Solver::GaussSeidel => gauss_seidel::solve(system, &mut mon),
+        Solver::Shooting => shooting::solve(system, &mut mon),
+        Solver::Progressive => progressive::solve(system, &mut mon),
+        Solver::StochasticJacobi | Solver::StochasticShooting => Err(Error::Invalid(format!(
+            "the {solver} solver casts rays and needs the geometry: use solve::stochastic::solve"
+        ))),
     }
 }
 
-pub(crate) struct Clock {
+/// The bookkeeping every solver shares: the clock (minus observer time), the history,
+/// progress messages, the observer and the stopping rules.
+pub(crate) struct Monitor<'a, 'o> {
+    solver: Solver,
+    pub(crate) opts: &'a Options,
+    pub(crate) progress: &'a dyn Progress,
+    observer: Option<&'a mut Observer<'o>>,
     start: Instant,
-    budget: Option<Duration>,
+    excluded: Duration,
+    history: Vec<IterationRecord>,
+    /// Rays cast so far.
+    pub(crate) rays: u64,
 }
 
-impl Clock {
-    pub(crate) fn seconds(&self) -> f64 {
-        self.start.elapsed().as_secs_f64()
+impl<'a, 'o> Monitor<'a, 'o> {
+    pub(crate) fn new(
+        solver: Solver,
+        opts: &'a Options,
+        progress: &'a dyn Progress,
+        observer: Option<&'a mut Observer<'o>>,
+    ) -> Self {
+        Monitor {
+            solver,
+            opts,
+            progress,
+            observer,
+            start: Instant::now(),
+            excluded: Duration::ZERO,
+            history: Vec::new(),
+            rays: 0,
+        }
     }
+
+    fn elapsed(&self) -> Duration {
+        self.start.elapsed().saturating_sub(self.excluded)
+    }
+
+    /// Solver seconds so far.
+    pub(crate) fn seconds(&self) -> f64 {
+        self.elapsed().as_secs_f64()
+    }
+
+    /// True once the time budget is spent.
     pub(crate) fn over_budget(&self) -> bool {
-        self.budget.is_some_and(|b| self.start.elapsed() >= b)
+        self.opts.time_budget.is_some_and(|b| self.elapsed() >= b)
+    }
+
+    /// True when an observer wants the radiosity after iterations.
+    pub(crate) fn observing(&self) -> bool {
+        self.observer.is_some()
+    }
+
+    /// Records iteration `iteration` (in the solver's units; `sweeps` the same in sweeps).
+    pub(crate) fn record(&mut self, iteration: usize, sweeps: f64, residual: f64) {
+        let rec = IterationRecord { iteration, sweeps, residual, seconds: self.seconds(), rays: self.rays };
+        self.history.push(rec);
+        let what = if self.solver == Solver::Progressive { "shots" } else { "iteration" };
+        let rays = if self.rays > 0 { format!(", {} rays", self.rays) } else { String::new() };
+        self.progress.message(&format!("{} {what} {iteration}: residual {residual:.3e}{rays}", self.solver));
+    }
+
+    /// Hands the current display radiosity to the observer, if any (computed only then).
+    pub(crate) fn observe<'b>(&mut self, iteration: usize, residual: f64, radiosity: impl FnOnce() -> Cow<'b, [Rgb]>) {
+        if self.observer.is_none() {
+            return;
+        }
+        let t = Instant::now();
+        let b = radiosity();
+        let state = IterationState {
+            solver: self.solver,
+            iteration,
+            residual,
+            seconds: self.seconds(),
+            rays: self.rays,
+            radiosity: &b,
+        };
+        if let Some(obs) = self.observer.as_mut() {
+            obs(&state);
+        }
+        self.excluded += t.elapsed();
+    }
+
+    /// The stopping rules, checked after `iteration` (0 = before the first) with its
+    /// residual: tolerance, then the iteration cap, an interrupt, the time budget.
+    pub(crate) fn check(&self, iteration: usize, residual: f64) -> Option<StopReason> {
+        if residual <= self.opts.tolerance {
+            Some(StopReason::Converged)
+        } else if iteration >= self.opts.max_iterations {
+            Some(StopReason::MaxIterations)
+        } else {
+            self.interrupted()
+        }
+    }
+
+    /// An interrupt or the end of the time budget (checked inside long iterations).
+    pub(crate) fn interrupted(&self) -> Option<StopReason> {
+        if self.progress.should_stop() {
+            Some(StopReason::Interrupted)
+        } else if self.over_budget() {
+            Some(StopReason::TimeBudget)
+        } else {
+            None
+        }
+    }
+
+    /// The statistics of the finished solve.
+    pub(crate) fn finish(&mut self, iterations: usize, residual: f64, stop: StopReason, error_estimate: Option<f64>) -> SolveStats {
+        SolveStats {
+            solver: self.solver.name().to_string(),
+            iterations,
+            residual,
+            stop,
+            seconds: self.seconds(),
+            rays: self.rays,
+            error_estimate,
+            history: std::mem::take(&mut self.history),
+        }
     }
 }
+
+/// Energy balance in the gathering formulation. With `unshot = Some(ΔB)` the shot part is
+/// `S = B − ΔB` (progressive refinement); with `None`, `S = B` and the residual
+/// `E + ρFB − B` is the unshot part (direct, Jacobi, Gauss–Seidel).
+pub(crate) fn energy_gathering(sys: &System, b: &[Rgb], unshot: Option<&[Rgb]>) -> EnergyBalance {
+    let n = b.len();
+    let shot: Cow<[Rgb]> = match unshot {
+        Some(u) => Cow::Owned(b.iter().zip(u).map(|(b, u)| *b - *u).collect()),
+        None => Cow::Borrowed(b),
+    };
+    let mut h = vec![Rgb::ZERO; n];
+    sys.transport.gather(&shot, &mut h);
+    let mut out = EnergyBalance { emitted: sys.emitted_power(), ..Default::default() };
+    let mut leaving = Rgb::ZERO;
+    let mut arriving = Rgb::ZERO;
+    for i in 0..n {
+        let a = sys.area[i];
+        out.absorbed += (Rgb::ONE - sys.reflectance[i]) * h[i] * a;
+        leaving += shot[i] * a;
+        arriving += h[i] * a;
+        out.unshot += match unshot {
+            Some(u) => u[i] * a,
+            None => (sys.emission[i] + sys.reflectance[i] * h[i] - b[i]) * a,
+        };
+    }
+    out.escaped = leaving - arriving;
+    out
+}
+
+/// Energy balance in the power formulation (senders' rows): element `j` sends `A_j S_j`
+/// with `S = B − ΔB`, of which `F_ji` arrives at `i`.
+pub(crate) fn energy_power(sys: &System, rows: &SparseRows, b: &[Rgb], unshot: &[Rgb]) -> EnergyBalance {
+    let n = b.len();
+    let mut arriving = vec![Rgb::ZERO; n];
+    let mut out = EnergyBalance { emitted: sys.emitted_power(), ..Default::default() };
+    for j in 0..n {
+        let phi = (b[j] - unshot[j]) * sys.area[j];
+        let (c, v) = rows.row(j);
+        let mut sent = 0.0;
+        for (&i, &f) in c.iter().zip(v) {
+            arriving[i as usize] += phi * f as f64;
+            sent += f as f64;
+        }
+        out.escaped += phi * (1.0 - sent);
+        out.unshot += unshot[j] * sys.area[j];
+    }
+    for i in 0..n {
+        // Elements with no open area (inside closed geometry) keep what reaches them.
+        let kept = if sys.area[i] > 0.0 { Rgb::ONE - sys.reflectance[i] } else { Rgb::ONE };
+        out.absorbed += kept * arriving[i];
+    }
+    out
+}
+
+/// Area-weighted relative RMS difference of the luminance of `b` from `reference`:
+/// `sqrt(Σ A_i lum(b_i − r_i)² / Σ A_i lum(r_i)²)`.
+pub fn relative_difference(area: &[f64], b: &[Rgb], reference: &[Rgb]) -> f64 {
+    let mut num = 0.0;
+    let mut den = 0.0;
+    for i in 0..b.len() {
+        num += area[i] * luminance(b[i] - reference[i]).powi(2);
+        den += area[i] * luminance(reference[i]).powi(2);
+    }
+    (num / den.max(f64::MIN_POSITIVE)).sqrt()
+}
+
+/// The largest relative difference of any channel of any element:
+/// `max_i,c |b_ic − r_ic| / |r_ic|` (values below 1e-12 of the channel's largest count as
+/// that floor, so black elements do not divide by zero).
+pub fn max_relative_difference(b: &[Rgb], reference: &[Rgb]) -> f64 {
+    let scale = reference.iter().fold(Rgb::ZERO, |m, r| m.max(r.abs()));
+    let floor = (scale * 1e-12).max(Rgb::splat(f64::MIN_POSITIVE));
+    b.iter().zip(reference).map(|(b, r)| ((*b - *r).abs() / r.abs().max(floor)).max_element()).fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests;

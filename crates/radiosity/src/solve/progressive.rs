@@ -7,29 +7,37 @@
 //! ```
 //!
 //! Column `j` of F is read from the transposed rows (exact, no reciprocity assumption, so
-//! it converges to the same B as the gathering solvers). For display, the ambient term
-//! ρ_i · R · Σ A_k ΔB_k / Σ A_k with R = 1/(1 − ρ̄) estimates the light still unshot.
-//! One reported iteration = one shot; `max_iterations` caps sweeps of `n` shots.
+//! it converges to the same B as the gathering solvers on any F; compare `shooting`, which
+//! uses the power formulation). For display, the ambient term
+//! `ρ_i · R · Σ A_k ΔB_k / Σ A_k` with `R = 1/(1 − ρ̄)` estimates the light still unshot
+//! (Cohen et al. 1988, §4). One reported iteration = one shot; `max_iterations` caps sweeps
+//! of `n` shots. History records are taken after 1, 2, 4 … shots and every n/16 shots; the
+//! observer is called after 1, 2, 4 … shots and then every n shots.
 
-use super::{Clock, IterationRecord, Options, Solution, SolveStats, StopReason, System};
-use crate::{luminance, Error, Progress, Result, Rgb};
+use std::borrow::Cow;
 
-pub(super) fn solve(sys: &System, opts: &Options, clock: &Clock, progress: &dyn Progress) -> Result<Solution> {
+use super::{energy_gathering, Monitor, Solution, Solver, StopReason, System};
+use crate::{luminance, Result, Rgb};
+
+pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
     let n = sys.len();
-    let rows = sys
-        .transport
-        .rows()
-        .ok_or_else(|| Error::Invalid("progressive refinement needs an operator with explicit rows".into()))?;
+    let rows = sys.rows(Solver::Progressive)?;
     let cols = rows.transpose();
     let mut b: Vec<Rgb> = sys.emission.to_vec();
     let mut unshot: Vec<Rgb> = sys.emission.to_vec();
     let emitted = luminance(sys.emitted_power()).max(f64::MIN_POSITIVE);
-    let total_area: f64 = sys.area.iter().sum();
-    let mut history = Vec::new();
+    let total_area: f64 = sys.area.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+    let area_rho: Rgb = sys.reflectance.iter().zip(sys.area).map(|(r, a)| *r * *a).sum();
+    let interreflection = Rgb::ONE / (Rgb::ONE - area_rho / total_area).max(Rgb::splat(1e-6));
+    let ambient = |u: &[Rgb]| -> Vec<Rgb> {
+        let area_unshot: Rgb = u.iter().zip(sys.area).map(|(u, a)| *u * *a).sum();
+        let amb = interreflection * area_unshot / total_area;
+        sys.reflectance.iter().map(|rho| *rho * amb).collect()
+    };
     let record_every = (n / 16).max(1);
-    let max_shots = opts.max_iterations.saturating_mul(n.max(1));
-    let mut shots = 0usize;
+    let max_shots = mon.opts.max_iterations.saturating_mul(n.max(1));
     let power = |i: usize, u: &[Rgb]| sys.area[i] * luminance(u[i]);
+    let mut shots = 0usize;
     let mut residual;
     let stop = loop {
         // Find the shooter and the total unshot power in one pass.
@@ -45,22 +53,25 @@ pub(super) fn solve(sys: &System, opts: &Options, clock: &Clock, progress: &dyn 
             }
         }
         residual = total / emitted;
-        if shots > 0 && (shots % record_every == 0) {
-            history.push(IterationRecord { iteration: shots, residual, seconds: clock.seconds() });
-            progress.message(&format!("progressive: {shots} shots, unshot power {residual:.3e}"));
+        let pow2 = shots.is_power_of_two() && shots < n;
+        if shots > 0 && (pow2 || shots % record_every == 0) {
+            mon.record(shots, shots as f64 / n as f64, residual);
         }
-        if residual <= opts.tolerance || best_p <= 0.0 {
+        if shots > 0 && (pow2 || shots % n == 0) && mon.observing() {
+            let (bb, uu) = (&b, &unshot);
+            mon.observe(shots, residual, || {
+                Cow::Owned(bb.iter().zip(ambient(uu)).map(|(b, a)| *b + a).collect())
+            });
+        }
+        if residual <= mon.opts.tolerance || best_p <= 0.0 {
             break StopReason::Converged;
         }
         if shots >= max_shots {
             break StopReason::MaxIterations;
         }
         if shots % 64 == 0 {
-            if progress.should_stop() {
-                break StopReason::Interrupted;
-            }
-            if clock.over_budget() {
-                break StopReason::TimeBudget;
+            if let Some(stop) = mon.interrupted() {
+                break stop;
             }
         }
         let db = unshot[best];
@@ -73,30 +84,10 @@ pub(super) fn solve(sys: &System, opts: &Options, clock: &Clock, progress: &dyn 
         }
         shots += 1;
     };
-    if history.last().is_none_or(|r| r.iteration != shots) {
-        history.push(IterationRecord { iteration: shots, residual, seconds: clock.seconds() });
+    if shots > 0 && !(shots.is_power_of_two() && shots < n || shots % record_every == 0) {
+        mon.record(shots, shots as f64 / n as f64, residual);
     }
-    // Ambient term for display.
-    let mut area_unshot = Rgb::ZERO;
-    let mut area_rho = Rgb::ZERO;
-    for i in 0..n {
-        area_unshot += unshot[i] * sys.area[i];
-        area_rho += sys.reflectance[i] * sys.area[i];
-    }
-    let rho_avg = area_rho / total_area.max(f64::MIN_POSITIVE);
-    let r = Rgb::ONE / (Rgb::ONE - rho_avg).max(Rgb::splat(1e-6));
-    let ambient = r * area_unshot / total_area.max(f64::MIN_POSITIVE);
-    let ambient: Vec<Rgb> = sys.reflectance.iter().map(|rho| *rho * ambient).collect();
-    Ok(Solution {
-        radiosity: b,
-        ambient: Some(ambient),
-        stats: SolveStats {
-            solver: "progressive".into(),
-            iterations: shots,
-            residual,
-            stop,
-            seconds: clock.seconds(),
-            history,
-        },
-    })
+    let energy = energy_gathering(sys, &b, Some(&unshot));
+    let ambient = ambient(&unshot);
+    Ok(Solution { radiosity: b, ambient: Some(ambient), energy, stats: mon.finish(shots, residual, stop, None) })
 }
