@@ -30,6 +30,8 @@ pub struct SolveFlags {
     /// Visibility rays per receiver point (n × n).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub visibility_samples: usize,
+    #[command(flatten)]
+    pub ff: FormFactorTuning,
     /// Solver: direct, jacobi, gauss-seidel, shooting, progressive, stochastic-jacobi,
     /// stochastic-shooting, or (solve only) all.
     #[arg(long, value_name = "NAME", default_value = "jacobi")]
@@ -97,12 +99,7 @@ impl SolveFlags {
         }
         Ok(Settings {
             mesh_size: self.mesh_size,
-            form_factors: form_factor::Options {
-                method,
-                seed: self.seed,
-                visibility_samples: self.visibility_samples,
-                ..Default::default()
-            },
+            form_factors: self.ff.options(method, self.seed, self.visibility_samples)?,
             solver,
             solve: radiosity::solve::Options {
                 tolerance: self.tolerance,
@@ -143,6 +140,37 @@ impl SolveFlags {
             eprintln!("warning: {w}");
         }
         Ok((scene, t.elapsed().as_secs_f64()))
+    }
+}
+
+/// Accuracy settings of the form-factor methods (shared by render, solve, viewfactors).
+#[derive(Args, Debug, Clone)]
+pub struct FormFactorTuning {
+    /// Hemicube: pixels along the top face (even; side faces are N × N/2).
+    #[arg(long, value_name = "N", default_value_t = form_factor::hemicube::DEFAULT_RESOLUTION)]
+    pub hemicube_resolution: usize,
+    /// Monte Carlo: rays per sender element.
+    #[arg(long, value_name = "N", default_value_t = form_factor::monte_carlo::DEFAULT_RAYS)]
+    pub mc_rays: usize,
+    /// Adaptive: relative tolerance of each form factor.
+    #[arg(long, value_name = "TOL", default_value_t = form_factor::adaptive::DEFAULT_TOLERANCE)]
+    pub ff_tolerance: f64,
+}
+
+impl FormFactorTuning {
+    /// Validated form-factor options.
+    pub fn options(&self, method: form_factor::Method, seed: u64, visibility_samples: usize) -> Result<form_factor::Options> {
+        let o = form_factor::Options {
+            method,
+            seed,
+            visibility_samples,
+            hemicube_resolution: self.hemicube_resolution,
+            mc_rays: self.mc_rays,
+            adaptive_tolerance: self.ff_tolerance,
+            ..Default::default()
+        };
+        o.validate()?;
+        Ok(o)
     }
 }
 

@@ -11,6 +11,7 @@ mod plot;
 mod progress;
 mod render;
 mod solve;
+mod viewfactors;
 
 use std::process::ExitCode;
 
@@ -32,6 +33,8 @@ enum Command {
     Solve(solve::SolveArgs),
     /// Compare a rendered EXR with a reference EXR (relative RMSE, light-masked too).
     Compare(compare::CompareArgs),
+    /// Compute a view-factor matrix (CSV, NumPy .npy, JSON or View3D text) with diagnostics.
+    Viewfactors(viewfactors::ViewfactorsArgs),
     /// Benchmarks (`bench rays`: BVH throughput on incoherent rays, against Embree with
     /// `--features embree`).
     Bench(bench::BenchArgs),
@@ -44,6 +47,7 @@ fn main() -> ExitCode {
         Command::Render(a) => render::run(a),
         Command::Solve(a) => solve::run(a),
         Command::Compare(a) => compare::run(a),
+        Command::Viewfactors(a) => viewfactors::run(a),
         Command::Bench(a) => bench::run(a),
     };
     match result {

@@ -34,6 +34,7 @@ pub mod sampling;
 pub mod scene;
 pub mod solve;
 pub mod transport;
+pub mod view_factors;
 
 pub use error::{Error, Location, Result, Warning};
 pub use progress::{NoProgress, Progress};

@@ -14,7 +14,8 @@
 
 use glam::DVec3;
 
-/// Maximum vertices of a polygon after clipping (input up to 8 vertices).
+/// Polygons with fewer vertices than this are clipped in stack buffers; larger ones (the
+/// 256-gon disks of the tests, shadow pieces) use the heap.
 const MAXV: usize = 16;
 
 /// Form factor from the differential area at `x` (unit normal `n`) to the convex polygon
@@ -46,18 +47,26 @@ pub fn point_to_point(x: DVec3, n: DVec3, y: DVec3, ny: DVec3, area: f64) -> f64
 
 /// As [`point_to_polygon`] without the front-side test.
 pub fn point_to_polygon_unsided(x: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
-    debug_assert!(poly.len() <= 8);
+    if poly.len() < MAXV {
+        let mut rel = [DVec3::ZERO; MAXV];
+        let mut buf = [DVec3::ZERO; MAXV];
+        contour(x, n, poly, &mut rel, &mut buf)
+    } else {
+        let mut rel = vec![DVec3::ZERO; poly.len()];
+        let mut buf = vec![DVec3::ZERO; poly.len() + 1];
+        contour(x, n, poly, &mut rel, &mut buf)
+    }
+}
+
+/// The clipped contour sum; `rel` holds `poly.len()` and `buf` `poly.len() + 1` points.
+fn contour(x: DVec3, n: DVec3, poly: &[DVec3], rel: &mut [DVec3], buf: &mut [DVec3]) -> f64 {
     // Positions relative to x, clipped to the upper half-space n·R >= 0.
-    let mut buf = [DVec3::ZERO; MAXV];
-    let mut m = 0;
     let mut all_above = true;
     let mut any_above = false;
-    let mut rel = [DVec3::ZERO; MAXV];
-    let mut h = [0.0f64; MAXV];
+    let len = poly.len();
     for (k, p) in poly.iter().enumerate() {
         rel[k] = *p - x;
-        h[k] = n.dot(rel[k]);
-        if h[k] > 0.0 {
+        if n.dot(rel[k]) > 0.0 {
             any_above = true;
         } else {
             all_above = false;
@@ -66,13 +75,13 @@ pub fn point_to_polygon_unsided(x: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
     if !any_above {
         return 0.0;
     }
-    let len = poly.len();
     let verts: &[DVec3] = if all_above {
         &rel[..len]
     } else {
+        let mut m = 0;
         for k in 0..len {
             let (a, b) = (rel[k], rel[(k + 1) % len]);
-            let (ha, hb) = (h[k], h[(k + 1) % len]);
+            let (ha, hb) = (n.dot(a), n.dot(b));
             if ha > 0.0 {
                 buf[m] = a;
                 m += 1;

@@ -15,234 +15,196 @@
 //! furnace test needs. Each row draws from its own random stream (seed, row), so results
 //! do not depend on the thread count.
 
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-
 use glam::DVec3;
-use rayon::prelude::*;
 
 use super::kernel::{point_to_point, point_to_polygon};
+use super::{Context, RowSource};
+use crate::mesh::coverage::MAX_K;
+use crate::sampling::{rng_for, stratified, Rng};
 
 /// Patches with at least this many elements get the far-field kernel with patch
 /// renormalisation.
 const BIG_PATCH: u32 = 8;
-use super::Options;
-use crate::accel::SceneRays;
-use crate::mesh::coverage::MAX_K;
-use crate::mesh::{Mesh, Receivers};
-use crate::sampling::{rng_for, stratified};
-use crate::scene::Scene;
-use crate::transport::SparseRows;
-use crate::{Error, Progress, Result};
 
-pub(super) fn compute(
-    scene: &Scene,
-    mesh: &Mesh,
-    rays: &SceneRays,
-    receivers: &Receivers,
-    opts: &Options,
-    progress: &dyn Progress,
-) -> Result<(SparseRows, u64)> {
-    let n = mesh.len();
-    progress.begin("form factors", n as u64);
-    let ray_count = AtomicU64::new(0);
-    let stopped = AtomicBool::new(false);
-    // Per-patch plane (point, normal) for culling whole patches.
-    let planes: Vec<(DVec3, DVec3)> = scene.polygons.iter().map(|p| (p.vertices[0], p.normal)).collect();
-    let diag = scene.diagonal();
-    let eps = 1e-9 * diag;
+pub(crate) struct Rows<'a> {
+    ctx: &'a Context<'a>,
+}
 
-    let rows: Vec<Vec<(u32, f32)>> = (0..n)
-        .into_par_iter()
-        .with_min_len(4)
-        .map_init(
-            || (Vec::new(), Vec::new(), u32::MAX, Vec::<u32>::new()),
-            |(vis_pts, row, cached_patch, patch_list), i| {
-                if stopped.load(Ordering::Relaxed) {
-                    return Vec::new();
-                }
-                if i % 64 == 0 && progress.should_stop() {
-                    stopped.store(true, Ordering::Relaxed);
-                    return Vec::new();
-                }
-                let ei = &mesh.elements[i];
-                let pi = ei.patch;
-                // Patches that can exchange light with patch `pi` at all: some vertex in
-                // front of pi's plane and some vertex of pi in front of theirs.
-                if *cached_patch != pi {
-                    *cached_patch = pi;
-                    patch_list.clear();
-                    let (ci, ni) = planes[pi as usize];
-                    let poly_i = &scene.polygons[pi as usize];
-                    for (q, poly) in scene.polygons.iter().enumerate() {
-                        if q as u32 == pi {
-                            continue;
-                        }
-                        let (cq, nq) = planes[q];
-                        let q_in_front = poly.vertices.iter().any(|v| ni.dot(*v - ci) > eps);
-                        let i_in_front = poly_i.vertices.iter().any(|v| nq.dot(*v - cq) > eps);
-                        if q_in_front && i_in_front {
-                            patch_list.push(q as u32);
-                        }
-                    }
-                }
-                let mut rng = rng_for(opts.seed, i as u64);
-                let size_i = ei.area.sqrt();
-                let mut nrays = 0u64;
-                row.clear();
-                let Some(&c1) = receivers.points(i, 1).first() else {
-                    progress.advance(1);
-                    return Vec::new(); // entirely covered: receives nothing
-                };
-                let kv = opts.visibility_samples.max(1);
-                // Visible fraction of element j seen from x (kv² stratified rays).
-                let mut visibility = |x: DVec3, j: u32, q: u32, rng: &mut crate::sampling::Rng, nrays: &mut u64| {
-                    let ej = &mesh.elements[j as usize];
-                    stratified(kv, rng, vis_pts);
-                    let mut seen = 0u32;
-                    let mut tried = 0u32;
-                    for &(a, b) in vis_pts.iter() {
-                        let y = ej.point(&mesh.positions, a, b);
-                        if ei.normal.dot(y - x) <= 0.0 {
-                            continue;
-                        }
-                        tried += 1;
-                        if rays.visible(x, pi, y, q) {
-                            seen += 1;
-                        }
-                    }
-                    *nrays += tried as u64;
-                    if tried == 0 {
-                        1.0
-                    } else {
-                        seen as f64 / tried as f64
-                    }
-                };
-                // Near pairs get k×k receiver points; far pairs the single point c1. The
-                // extra exchange D that the finer sets find with near neighbours is taken
-                // from the far field (scale α), so each row sums exactly to the unoccluded
-                // total seen from c1 — one in a closed room (the furnace test).
-                let mut near_excess = 0.0;
-                let mut far_sum = 0.0;
-                for &q in patch_list.iter() {
-                    let pe = mesh.patches[q as usize];
-                    let poly_q = &scene.polygons[q as usize];
-                    // Large patches: far elements use the point-to-point kernel and are then
-                    // scaled so that, with the exact near ones, they add up to the exact
-                    // factor to the whole patch (contour integral) — cheap and still exact in
-                    // total, which keeps closed rooms closed.
-                    let big = pe.count >= BIG_PATCH;
-                    let exact_q = if big { point_to_polygon(c1, ei.normal, &poly_q.vertices, poly_q.normal) } else { 0.0 };
-                    let far_start = row.len();
-                    let mut approx_far_q = 0.0;
-                    let mut near_f1_q = 0.0;
-                    for j in pe.first..pe.first + pe.count {
-                        let ej = &mesh.elements[j as usize];
-                        let (cj, nv) = ej.corners(&mesh.positions);
-                        let cj = &cj[..nv];
-                        // Element-level cull.
-                        if !cj.iter().any(|v| ei.normal.dot(*v - ei.centroid) > eps) {
-                            continue;
-                        }
-                        let d = (ej.centroid - ei.centroid).length();
-                        let size_j = ej.area.sqrt();
-                        let ratio = size_i.max(size_j) / d.max(1e-300);
-                        let k = if ratio < 0.25 {
-                            1
-                        } else if ratio < 0.6 {
-                            2
-                        } else {
-                            opts.max_receiver_samples.max(1)
-                        }
-                        .min(opts.max_receiver_samples.max(1));
-                        // A partly covered element may have a single open point at level k:
-                        // go finer rather than fall back to the representative point.
-                        let mut k = k;
-                        while k > 1 && k < MAX_K && receivers.points(i, k).len() <= 1 {
-                            k += 1;
-                        }
-                        let recv_pts = receivers.points(i, k);
-                        if k == 1 || recv_pts.len() <= 1 {
-                            let f1 = if big {
-                                point_to_point(c1, ei.normal, ej.centroid, ej.normal, ej.area)
-                            } else {
-                                point_to_polygon(c1, ei.normal, cj, ej.normal)
-                            };
-                            if f1 > 0.0 {
-                                approx_far_q += f1;
-                                let v = visibility(c1, j, q, &mut rng, &mut nrays);
-                                row.push((j, f1 * v, true, (size_i / d.max(1e-300)).powi(2)));
-                            }
-                            continue;
-                        }
-                        let f1 = point_to_polygon(c1, ei.normal, cj, ej.normal);
-                        near_f1_q += f1;
-                        let mut sum = 0.0;
-                        let mut unocc = 0.0;
-                        for &x in recv_pts.iter() {
-                            let f = point_to_polygon(x, ei.normal, cj, ej.normal);
-                            if f <= 0.0 {
-                                continue;
-                            }
-                            unocc += f;
-                            sum += f * visibility(x, j, q, &mut rng, &mut nrays);
-                        }
-                        let m = recv_pts.len() as f64;
-                        near_excess += unocc / m - f1;
-                        if sum > 0.0 {
-                            row.push((j, sum / m, false, 0.0));
-                        }
-                    }
-                    if big && approx_far_q > 0.0 {
-                        let target = (exact_q - near_f1_q).max(0.0);
-                        let scale = target / approx_far_q;
-                        for e in row[far_start..].iter_mut().filter(|e| e.2) {
-                            e.1 *= scale;
-                        }
-                        far_sum += target;
-                    } else {
-                        far_sum += approx_far_q;
-                    }
-                }
-                // The excess D is taken from the far field in proportion to F_ij·(s_i/d_ij)²:
-                // the difference between an element's mean and its centroid value is a
-                // second-order term, so nearer parts of the far field give it up and a
-                // distant light barely does (a uniform scale would dim direct light near
-                // every corner).
-                let _ = far_sum;
-                let wsum: f64 = row.iter().filter(|e| e.2).map(|e| e.1 * e.3).sum();
-                let near_vis: f64 = row.iter().filter(|e| !e.2).map(|e| e.1).sum();
-                let far_vis: f64 = row.iter().filter(|e| e.2).map(|e| e.1).sum();
-                let scale_far = |e: &(u32, f64, bool, f64)| -> f64 {
-                    if !e.2 {
-                        return e.1;
-                    }
-                    if wsum > 0.0 {
-                        e.1 * (1.0 - near_excess * e.3 / wsum).clamp(0.0, 2.0)
-                    } else {
-                        e.1
-                    }
-                };
-                let mut out: Vec<(u32, f32)> = row.iter().map(|e| (e.0, scale_far(e))).map(|(j, v)| (j, v as f32)).filter(|e| e.1 > 0.0).collect();
-                // Never let the correction push a row above one (no point sees more than its
-                // hemisphere).
-                let total: f64 = out.iter().map(|e| e.1 as f64).sum();
-                if total > 1.0 && far_vis > 0.0 {
-                    let k = ((1.0 - near_vis) / (total - near_vis)).max(0.0);
-                    let near: std::collections::HashSet<u32> = row.iter().filter(|e| !e.2).map(|e| e.0).collect();
-                    for e in out.iter_mut().filter(|e| !near.contains(&e.0)) {
-                        e.1 = (e.1 as f64 * k) as f32;
-                    }
-                }
-                ray_count.fetch_add(nrays, Ordering::Relaxed);
-                progress.advance(1);
-                out.sort_unstable_by_key(|e| e.0);
-                out
-            },
-        )
-        .collect();
-    progress.end();
-    if stopped.load(Ordering::Relaxed) {
-        return Err(Error::Cancelled);
+impl<'a> Rows<'a> {
+    pub fn new(ctx: &'a Context<'a>) -> Self {
+        Rows { ctx }
     }
-    Ok((SparseRows::from_rows(rows), ray_count.load(Ordering::Relaxed)))
+}
+
+/// Visibility points, the row (column, factor, far, far weight), the patch the list is for, its facing
+/// patches.
+pub(crate) type Scratch = (Vec<(f64, f64)>, Vec<(u32, f64, bool, f64)>, u32, Vec<u32>);
+
+impl RowSource for Rows<'_> {
+    type Scratch = Scratch;
+
+    fn scratch(&self) -> Scratch {
+        (Vec::new(), Vec::new(), u32::MAX, Vec::new())
+    }
+
+    fn row(&self, i: usize, s: &mut Scratch, out: &mut Vec<(u32, f64)>) -> u64 {
+        let (vis_pts, row, cached_patch, patch_list) = s;
+        let ctx = self.ctx;
+        let (scene, mesh, rays, receivers, opts, eps) = (ctx.scene, ctx.mesh, ctx.rays, ctx.receivers, ctx.opts, ctx.eps);
+        let ei = &mesh.elements[i];
+        let pi = ei.patch;
+        if *cached_patch != pi {
+            *cached_patch = pi;
+            ctx.facing_patches(pi, patch_list);
+        }
+        let mut rng = rng_for(opts.seed, i as u64);
+        let size_i = ei.area.sqrt();
+        let mut nrays = 0u64;
+        row.clear();
+        let Some(&c1) = receivers.points(i, 1).first() else {
+            return 0; // entirely covered: receives nothing
+        };
+        let kv = opts.visibility_samples.max(1);
+        // Visible fraction of element j seen from x (kv² stratified rays).
+        let mut visibility = |x: DVec3, j: u32, q: u32, rng: &mut Rng, nrays: &mut u64| {
+            let ej = &mesh.elements[j as usize];
+            stratified(kv, rng, vis_pts);
+            let mut seen = 0u32;
+            let mut tried = 0u32;
+            for &(a, b) in vis_pts.iter() {
+                let y = ej.point(&mesh.positions, a, b);
+                if ei.normal.dot(y - x) <= 0.0 {
+                    continue;
+                }
+                tried += 1;
+                if rays.visible(x, pi, y, q) {
+                    seen += 1;
+                }
+            }
+            *nrays += tried as u64;
+            if tried == 0 {
+                1.0
+            } else {
+                seen as f64 / tried as f64
+            }
+        };
+        // Near pairs get k×k receiver points; far pairs the single point c1. The
+        // extra exchange D that the finer sets find with near neighbours is taken
+        // from the far field (scale α), so each row sums exactly to the unoccluded
+        // total seen from c1 — one in a closed room (the furnace test).
+        let mut near_excess = 0.0;
+        let mut far_sum = 0.0;
+        for &q in patch_list.iter() {
+            let pe = mesh.patches[q as usize];
+            let poly_q = &scene.polygons[q as usize];
+            // Large patches: far elements use the point-to-point kernel and are then
+            // scaled so that, with the exact near ones, they add up to the exact
+            // factor to the whole patch (contour integral) — cheap and still exact in
+            // total, which keeps closed rooms closed.
+            let big = pe.count >= BIG_PATCH;
+            let exact_q = if big { point_to_polygon(c1, ei.normal, &poly_q.vertices, poly_q.normal) } else { 0.0 };
+            let far_start = row.len();
+            let mut approx_far_q = 0.0;
+            let mut near_f1_q = 0.0;
+            for j in pe.first..pe.first + pe.count {
+                let ej = &mesh.elements[j as usize];
+                let (cj, nv) = ej.corners(&mesh.positions);
+                let cj = &cj[..nv];
+                // Element-level cull.
+                if !cj.iter().any(|v| ei.normal.dot(*v - ei.centroid) > eps) {
+                    continue;
+                }
+                let d = (ej.centroid - ei.centroid).length();
+                let size_j = ej.area.sqrt();
+                let ratio = size_i.max(size_j) / d.max(1e-300);
+                let k = if ratio < 0.25 {
+                    1
+                } else if ratio < 0.6 {
+                    2
+                } else {
+                    opts.max_receiver_samples.max(1)
+                }
+                .min(opts.max_receiver_samples.max(1));
+                // A partly covered element may have a single open point at level k:
+                // go finer rather than fall back to the representative point.
+                let mut k = k;
+                while k > 1 && k < MAX_K && receivers.points(i, k).len() <= 1 {
+                    k += 1;
+                }
+                let recv_pts = receivers.points(i, k);
+                if k == 1 || recv_pts.len() <= 1 {
+                    let f1 = if big {
+                        point_to_point(c1, ei.normal, ej.centroid, ej.normal, ej.area)
+                    } else {
+                        point_to_polygon(c1, ei.normal, cj, ej.normal)
+                    };
+                    if f1 > 0.0 {
+                        approx_far_q += f1;
+                        let v = visibility(c1, j, q, &mut rng, &mut nrays);
+                        row.push((j, f1 * v, true, (size_i / d.max(1e-300)).powi(2)));
+                    }
+                    continue;
+                }
+                let f1 = point_to_polygon(c1, ei.normal, cj, ej.normal);
+                near_f1_q += f1;
+                let mut sum = 0.0;
+                let mut unocc = 0.0;
+                for &x in recv_pts.iter() {
+                    let f = point_to_polygon(x, ei.normal, cj, ej.normal);
+                    if f <= 0.0 {
+                        continue;
+                    }
+                    unocc += f;
+                    sum += f * visibility(x, j, q, &mut rng, &mut nrays);
+                }
+                let m = recv_pts.len() as f64;
+                near_excess += unocc / m - f1;
+                if sum > 0.0 {
+                    row.push((j, sum / m, false, 0.0));
+                }
+            }
+            if big && approx_far_q > 0.0 {
+                let target = (exact_q - near_f1_q).max(0.0);
+                let scale = target / approx_far_q;
+                for e in row[far_start..].iter_mut().filter(|e| e.2) {
+                    e.1 *= scale;
+                }
+                far_sum += target;
+            } else {
+                far_sum += approx_far_q;
+            }
+        }
+        // The excess D is taken from the far field in proportion to F_ij·(s_i/d_ij)²:
+        // the difference between an element's mean and its centroid value is a
+        // second-order term, so nearer parts of the far field give it up and a
+        // distant light barely does (a uniform scale would dim direct light near
+        // every corner).
+        let _ = far_sum;
+        let wsum: f64 = row.iter().filter(|e| e.2).map(|e| e.1 * e.3).sum();
+        let near_vis: f64 = row.iter().filter(|e| !e.2).map(|e| e.1).sum();
+        let far_vis: f64 = row.iter().filter(|e| e.2).map(|e| e.1).sum();
+        let scale_far = |e: &(u32, f64, bool, f64)| -> f64 {
+            if !e.2 {
+                return e.1;
+            }
+            if wsum > 0.0 {
+                e.1 * (1.0 - near_excess * e.3 / wsum).clamp(0.0, 2.0)
+            } else {
+                e.1
+            }
+        };
+        let start = out.len();
+        out.extend(row.iter().map(|e| (e.0, scale_far(e))).filter(|e| e.1 > 0.0));
+        // Never let the correction push a row above one (no point sees more than its
+        // hemisphere).
+        let total: f64 = out[start..].iter().map(|e| e.1).sum();
+        if total > 1.0 && far_vis > 0.0 {
+            let k = ((1.0 - near_vis) / (total - near_vis)).max(0.0);
+            let near: std::collections::HashSet<u32> = row.iter().filter(|e| !e.2).map(|e| e.0).collect();
+            for e in out[start..].iter_mut().filter(|e| !near.contains(&e.0)) {
+                e.1 *= k;
+            }
+        }
+        nrays
+    }
 }

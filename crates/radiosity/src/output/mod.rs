@@ -10,6 +10,7 @@
 //! library has no file-system side effects.
 
 pub mod exr;
+pub mod matrix;
 pub mod metrics;
 pub mod png;
 

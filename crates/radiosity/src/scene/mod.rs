@@ -18,6 +18,7 @@ pub mod gltf;
 pub mod obj;
 pub mod toml_file;
 mod validate;
+pub mod vs3;
 
 use std::path::Path;
 
@@ -86,6 +87,9 @@ pub struct SceneDesc {
     pub camera: Option<Camera>,
     /// Treat every surface as two-sided.
     pub two_sided: bool,
+    /// Objects that only block rays (View3D `O` surfaces): they shadow, but view-factor
+    /// matrices give them no row or column. Indices into [`SceneDesc::objects`].
+    pub obstructions: Vec<u32>,
     /// Warnings met while reading.
     pub warnings: Vec<Warning>,
 }
@@ -163,6 +167,8 @@ pub struct Scene {
     pub camera: Option<Camera>,
     /// Warnings from reading and validation (skipped geometry, defaults used).
     pub warnings: Vec<Warning>,
+    /// Obstruction-only objects, sorted (see [`SceneDesc::obstructions`]).
+    pub obstructions: Vec<u32>,
 }
 
 impl Scene {
@@ -198,6 +204,11 @@ impl Scene {
     pub fn total_area(&self) -> f64 {
         self.polygons.iter().map(|p| p.area).sum()
     }
+
+    /// True if `object` only blocks rays (see [`SceneDesc::obstructions`]).
+    pub fn is_obstruction(&self, object: u32) -> bool {
+        self.obstructions.binary_search(&object).is_ok()
+    }
 }
 
 /// Reads a scene: a built-in name (`cornell`, `furnace`) or a file (`.obj`, `.gltf`, `.glb`,
@@ -218,9 +229,10 @@ pub fn load(spec: &str) -> Result<SceneDesc> {
         "obj" => obj::load_obj(path),
         "gltf" | "glb" => gltf::load_gltf(path),
         "toml" => toml_file::load_toml(path),
+        "vs3" => vs3::load_vs3(path),
         other => Err(Error::input(
             Location::file(path),
-            format!("unknown scene format '.{other}' (expected .obj, .gltf, .glb or .toml)"),
+            format!("unknown scene format '.{other}' (expected .obj, .gltf, .glb, .toml or .vs3)"),
         )),
     }
 }

@@ -12,7 +12,7 @@ use crate::{Error, Location, Result, Warning};
 const PLANARITY_TOL: f64 = 1e-6;
 
 pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
-    let SceneDesc { name, materials, objects, polygons, camera, two_sided, mut warnings } = desc;
+    let SceneDesc { name, materials, objects, polygons, camera, two_sided, obstructions, mut warnings } = desc;
     let here = |loc: &Option<Location>| loc.clone().unwrap_or_else(|| Location::file(&name));
 
     // Materials: physical values only.
@@ -166,7 +166,13 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
         })
         .collect();
 
-    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings })
+    let mut obstructions = obstructions;
+    if let Some(&o) = obstructions.iter().find(|&&o| o as usize >= objects.len()) {
+        return Err(Error::Invalid(format!("{name}: obstruction object {o} does not exist")));
+    }
+    obstructions.sort_unstable();
+    obstructions.dedup();
+    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions })
 }
 
 enum Cleaned {

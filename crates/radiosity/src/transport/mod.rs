@@ -8,8 +8,10 @@
 //! ray-based matrix-free operators implement the same trait, so no solver assumes an
 //! `n × n` matrix.
 
+mod dense;
 mod sparse;
 
+pub use dense::{available_memory, DenseMatrix};
 pub use sparse::SparseRows;
 
 use crate::Rgb;

@@ -1,0 +1,115 @@
+//! `radiosity viewfactors`: every output format, a View3D input, the enclosure flag, the
+//! comparison with a reference, and clear errors.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn run(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_radiosity")).args(args).output().unwrap();
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into())
+}
+
+fn data(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../radiosity/tests/data").join(name).to_string_lossy().into()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("radiosity-vf-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn parallel_planes_in_every_format() {
+    let exact = 0.199824895698;
+    let scene = data("ParallelPlanes.vs3");
+    let json = tmp("pp.json");
+    let (code, err) = run(&["viewfactors", &scene, "--method", "analytic", "-o", json.to_str().unwrap(), "--quiet"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["names"][1], "top");
+    assert!((v["matrix"][0][1].as_f64().unwrap() - exact).abs() < 1e-12);
+    assert!(v["diagnostics"]["reciprocity_max_rel"].as_f64().unwrap() < 1e-12);
+
+    let csv = tmp("pp.csv");
+    assert_eq!(run(&["viewfactors", &scene, "--method", "analytic", "-o", csv.to_str().unwrap(), "-q"]).0, 0);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines[0], "surface,area,bottom,top");
+    let f: f64 = lines[1].split(',').nth(3).unwrap().parse().unwrap();
+    assert!((f - exact).abs() < 1e-12);
+
+    let npy = tmp("pp.npy");
+    assert_eq!(run(&["viewfactors", &scene, "--method", "analytic", "-o", npy.to_str().unwrap(), "-q"]).0, 0);
+    let b = std::fs::read(&npy).unwrap();
+    let hl = u16::from_le_bytes([b[8], b[9]]) as usize;
+    let f = f64::from_le_bytes(b[10 + hl + 8..10 + hl + 16].try_into().unwrap());
+    assert!((f - exact).abs() < 1e-12);
+
+    let vf = tmp("pp.vf");
+    assert_eq!(run(&["viewfactors", &scene, "--method", "analytic", "-o", vf.to_str().unwrap(), "-q"]).0, 0);
+    let text = std::fs::read_to_string(&vf).unwrap();
+    assert_eq!(text.lines().nth(2).unwrap(), "0.000000 0.199825");
+}
+
+#[test]
+fn box345_enclosure_from_the_file_and_per_element_streaming() {
+    let scene = data("box345.vs3");
+    let out = tmp("box.json");
+    let report = tmp("box-report.json");
+    let (code, err) = run(&[
+        "viewfactors", &scene, "--method", "monte-carlo", "--mesh-size", "0", "--mc-rays", "1024",
+        "-o", out.to_str().unwrap(), "--report", report.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("encl=1"), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert!(v["diagnostics"]["reciprocity_max_rel"].as_f64().unwrap() <= 1e-6);
+    assert!(v["diagnostics"]["closure_max_error"].as_f64().unwrap() <= 1e-9);
+    assert!(v["enclosure"]["max_change"].as_f64().unwrap() > 0.0);
+    // A memory limit below the dense matrix streams per-element rows instead.
+    let npy = tmp("box.npy");
+    let (code, err) = run(&[
+        "viewfactors", &scene, "--method", "monte-carlo", "--mc-rays", "16", "--per", "element", "--mesh-size", "0",
+        "--no-enclosure", "--memory-limit", "10K", "-o", npy.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("streamed"), "{err}");
+    assert_eq!(std::fs::metadata(&npy).unwrap().len(), 128 + 106 * 106 * 8);
+    // ... but the enclosure correction needs the whole matrix: a clear error with the size.
+    let (code, err) =
+        run(&["viewfactors", &scene, "--per", "element", "--mesh-size", "0", "--memory-limit", "10K", "-o", npy.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("would need 87.8 KiB"), "{err}");
+}
+
+#[test]
+fn cornell_comparison_with_the_reference() {
+    let out = tmp("cornell.json");
+    let report = tmp("cornell-report.json");
+    let (code, err) = run(&[
+        "viewfactors", "cornell", "--method", "adaptive", "-o", out.to_str().unwrap(),
+        "--compare", &data("cornell_view_factors_monte_carlo.json"), "--report", report.to_str().unwrap(), "-q",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert!(r["comparison"]["max_abs_error"].as_f64().unwrap() <= 1e-3, "{}", r["comparison"]);
+    assert!(r["comparison"]["max_abs_error_per_row"]["floor"].as_f64().unwrap() <= 1e-3);
+}
+
+#[test]
+fn bad_requests_are_clear_errors() {
+    let o = tmp("x.xyz");
+    let (code, err) = run(&["viewfactors", "cornell", "-o", o.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("cannot tell the format"), "{err}");
+    let o = tmp("x.csv");
+    let (code, err) = run(&["viewfactors", "cornell", "--method", "radiance", "-o", o.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("unknown form-factor method 'radiance'"), "{err}");
+    // The Cornell box is open: closure cannot be enforced.
+    let (code, err) = run(&["viewfactors", "cornell", "--enclosure", "-o", o.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("not an enclosure"), "{err}");
+    assert!(!o.exists(), "no output is written on error");
+}

@@ -1,0 +1,388 @@
+//! Geometry shared by the form-factor methods: Gauss–Legendre nodes, clipping of convex
+//! polygons by planes, 2-D convex set differences (for shadows) and small polygon helpers.
+//!
+//! Everything is f64; polygons are vertex lists in order (convex unless stated).
+
+use std::sync::OnceLock;
+
+use glam::{DVec2, DVec3};
+
+/// Largest Gauss–Legendre order kept in the table.
+pub const MAX_GAUSS: usize = 32;
+
+/// Gauss–Legendre nodes and weights of order `n` (1 ≤ n ≤ [`MAX_GAUSS`]) on [0, 1]: the
+/// weights sum to 1 and the rule integrates polynomials of degree 2n − 1 exactly.
+///
+/// Nodes are the roots of the Legendre polynomial P_n found by Newton's method from
+/// Tricomi's initial guesses; accurate to a few ulps.
+pub fn gauss_legendre(n: usize) -> &'static [(f64, f64)] {
+    static TABLE: OnceLock<Vec<Vec<(f64, f64)>>> = OnceLock::new();
+    let t = TABLE.get_or_init(|| (0..=MAX_GAUSS).map(gl_nodes).collect());
+    &t[n.clamp(1, MAX_GAUSS)]
+}
+
+fn gl_nodes(n: usize) -> Vec<(f64, f64)> {
+    if n == 0 {
+        return Vec::new();
+    }
+    let mut out = Vec::with_capacity(n);
+    for k in 1..=n {
+        let mut x = (std::f64::consts::PI * (k as f64 - 0.25) / (n as f64 + 0.5)).cos();
+        let mut dp = 1.0;
+        for _ in 0..100 {
+            // P_n(x) and P_{n-1}(x) by the three-term recurrence.
+            let (mut p0, mut p1) = (1.0f64, x);
+            for j in 2..=n {
+                let p2 = ((2 * j - 1) as f64 * x * p1 - (j - 1) as f64 * p0) / j as f64;
+                p0 = p1;
+                p1 = p2;
+            }
+            let pn = if n == 1 { x } else { p1 };
+            let pm = if n == 1 { 1.0 } else { p0 };
+            dp = n as f64 * (x * pn - pm) / (x * x - 1.0);
+            let dx = pn / dp;
+            x -= dx;
+            if dx.abs() < 1e-16 {
+                break;
+            }
+        }
+        let w = 2.0 / ((1.0 - x * x) * dp * dp);
+        out.push((0.5 * (1.0 + x), 0.5 * w));
+    }
+    out.reverse();
+    out
+}
+
+/// Clips the convex polygon `poly` to the half-space `dist(p) >= 0` (`dist` affine, e.g. a
+/// signed plane distance), appending the result to `out` (cleared first). Vertices with
+/// `|dist| <= eps` count as on the plane and are kept.
+pub fn clip_halfspace(poly: &[DVec3], dist: impl Fn(DVec3) -> f64, eps: f64, out: &mut Vec<DVec3>) {
+    out.clear();
+    let m = poly.len();
+    if m == 0 {
+        return;
+    }
+    let mut dprev = snap(dist(poly[m - 1]), eps);
+    let mut prev = poly[m - 1];
+    for &cur in poly {
+        let dcur = snap(dist(cur), eps);
+        if (dprev > 0.0 && dcur < 0.0) || (dprev < 0.0 && dcur > 0.0) {
+            let t = dprev / (dprev - dcur);
+            out.push(prev + (cur - prev) * t);
+        }
+        if dcur >= 0.0 {
+            out.push(cur);
+        }
+        prev = cur;
+        dprev = dcur;
+    }
+    if out.len() < 3 {
+        out.clear();
+    }
+}
+
+#[inline]
+fn snap(d: f64, eps: f64) -> f64 {
+    if d.abs() <= eps {
+        0.0
+    } else {
+        d
+    }
+}
+
+/// Twice the signed area of a 2-D polygon (positive when counter-clockwise).
+pub fn area2_2d(p: &[DVec2]) -> f64 {
+    let m = p.len();
+    let mut a = 0.0;
+    for k in 0..m {
+        a += p[k].perp_dot(p[(k + 1) % m]);
+    }
+    a
+}
+
+/// Area of a planar 3-D polygon.
+pub fn area_3d(p: &[DVec3]) -> f64 {
+    0.5 * crate::scene::newell_normal(p).length()
+}
+
+/// Clips a convex 2-D polygon to the left of the directed line `a → b` (`side = 1`) or to
+/// its right (`side = -1`), appending to `out` (not cleared).
+fn clip_line_2d(poly: &[DVec2], a: DVec2, b: DVec2, side: f64, eps: f64, out: &mut Vec<DVec2>) -> usize {
+    let start = out.len();
+    let e = b - a;
+    let len = e.length();
+    let d = |p: DVec2| {
+        let v = side * e.perp_dot(p - a) / len;
+        if v.abs() <= eps {
+            0.0
+        } else {
+            v
+        }
+    };
+    let m = poly.len();
+    let mut prev = poly[m - 1];
+    let mut dprev = d(prev);
+    for &cur in poly {
+        let dcur = d(cur);
+        if (dprev > 0.0 && dcur < 0.0) || (dprev < 0.0 && dcur > 0.0) {
+            let t = dprev / (dprev - dcur);
+            out.push(prev + (cur - prev) * t);
+        }
+        if dcur >= 0.0 {
+            out.push(cur);
+        }
+        prev = cur;
+        dprev = dcur;
+    }
+    let n = out.len() - start;
+    if n < 3 {
+        out.truncate(start);
+        0
+    } else {
+        n
+    }
+}
+
+/// A set of disjoint convex 2-D polygons stored flat (one buffer, ranges).
+#[derive(Clone, Debug, Default)]
+pub struct PieceSet {
+    pts: Vec<DVec2>,
+    ranges: Vec<(u32, u32)>,
+}
+
+impl PieceSet {
+    /// Empties the set.
+    pub fn clear(&mut self) {
+        self.pts.clear();
+        self.ranges.clear();
+    }
+    /// Adds one convex piece.
+    pub fn push(&mut self, p: &[DVec2]) {
+        let s = self.pts.len() as u32;
+        self.pts.extend_from_slice(p);
+        self.ranges.push((s, self.pts.len() as u32));
+    }
+    /// Number of pieces.
+    pub fn len(&self) -> usize {
+        self.ranges.len()
+    }
+    /// True if there are no pieces.
+    pub fn is_empty(&self) -> bool {
+        self.ranges.is_empty()
+    }
+    /// Piece `k`.
+    pub fn piece(&self, k: usize) -> &[DVec2] {
+        let (a, b) = self.ranges[k];
+        &self.pts[a as usize..b as usize]
+    }
+    /// Total area.
+    pub fn area(&self) -> f64 {
+        (0..self.len()).map(|k| 0.5 * area2_2d(self.piece(k)).abs()).sum()
+    }
+
+    /// `self \ cutter` into `out` (cleared), for a counter-clockwise convex `cutter`.
+    /// Each piece is cut by the cutter's edge lines: the part outside an edge is kept, the
+    /// rest goes on to the next edge, and what is left inside all edges is dropped. Pieces
+    /// whose area is below `min_area` are dropped too (slivers from rounding).
+    pub fn subtract(&self, cutter: &[DVec2], eps: f64, min_area: f64, out: &mut PieceSet, tmp: &mut [Vec<DVec2>; 2]) {
+        out.clear();
+        let (clo, chi) = bounds_2d(cutter);
+        let m = cutter.len();
+        let [cur, next] = tmp;
+        for k in 0..self.len() {
+            let p = self.piece(k);
+            let (plo, phi) = bounds_2d(p);
+            if plo.x >= chi.x - eps || plo.y >= chi.y - eps || phi.x <= clo.x + eps || phi.y <= clo.y + eps {
+                out.push(p);
+                continue;
+            }
+            cur.clear();
+            cur.extend_from_slice(p);
+            for e in 0..m {
+                let (a, b) = (cutter[e], cutter[(e + 1) % m]);
+                if (b - a).length_squared() == 0.0 {
+                    continue;
+                }
+                // The part outside this edge (right of a→b) is outside the cutter: keep it.
+                let s = out.pts.len();
+                if clip_line_2d(cur, a, b, -1.0, eps, &mut out.pts) > 0 {
+                    if 0.5 * area2_2d(&out.pts[s..]).abs() > min_area {
+                        out.ranges.push((s as u32, out.pts.len() as u32));
+                    } else {
+                        out.pts.truncate(s);
+                    }
+                }
+                // The inside part goes on to the next edge.
+                next.clear();
+                let n_in = clip_line_2d(cur, a, b, 1.0, eps, next);
+                std::mem::swap(cur, next);
+                if n_in == 0 {
+                    break;
+                }
+            }
+        }
+    }
+}
+
+impl PieceSet {
+    /// Cuts every piece by the line through `a` and `b` (both sides kept), into `out`
+    /// (cleared). Pieces below `min_area` are dropped.
+    pub fn split(&self, a: DVec2, b: DVec2, eps: f64, min_area: f64, out: &mut PieceSet) {
+        out.clear();
+        if (b - a).length_squared() == 0.0 {
+            for k in 0..self.len() {
+                out.push(self.piece(k));
+            }
+            return;
+        }
+        for k in 0..self.len() {
+            let p = self.piece(k);
+            for side in [1.0, -1.0] {
+                let s = out.pts.len();
+                if clip_line_2d(p, a, b, side, eps, &mut out.pts) > 0 {
+                    if 0.5 * area2_2d(&out.pts[s..]).abs() > min_area {
+                        out.ranges.push((s as u32, out.pts.len() as u32));
+                    } else {
+                        out.pts.truncate(s);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Axis-aligned bounds of 2-D points.
+pub fn bounds_2d(p: &[DVec2]) -> (DVec2, DVec2) {
+    let mut lo = DVec2::splat(f64::INFINITY);
+    let mut hi = DVec2::splat(f64::NEG_INFINITY);
+    for &q in p {
+        lo = lo.min(q);
+        hi = hi.max(q);
+    }
+    (lo, hi)
+}
+
+/// Axis-aligned bounds of 3-D points.
+pub fn bounds_3d(p: &[DVec3]) -> (DVec3, DVec3) {
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for &q in p {
+        lo = lo.min(q);
+        hi = hi.max(q);
+    }
+    (lo, hi)
+}
+
+/// Shortest distance between the segments `p0p1` and `q0q1` (Ericson 2005, §5.1.9).
+pub fn segment_distance(p0: DVec3, p1: DVec3, q0: DVec3, q1: DVec3) -> f64 {
+    let d1 = p1 - p0;
+    let d2 = q1 - q0;
+    let r = p0 - q0;
+    let a = d1.length_squared();
+    let e = d2.length_squared();
+    let f = d2.dot(r);
+    let (s, t);
+    if a <= 0.0 && e <= 0.0 {
+        return r.length();
+    }
+    if a <= 0.0 {
+        s = 0.0;
+        t = (f / e).clamp(0.0, 1.0);
+    } else {
+        let c = d1.dot(r);
+        if e <= 0.0 {
+            t = 0.0;
+            s = (-c / a).clamp(0.0, 1.0);
+        } else {
+            let b = d1.dot(d2);
+            let denom = a * e - b * b;
+            let mut s0 = if denom > 0.0 { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.0 };
+            let mut t0 = (b * s0 + f) / e;
+            if t0 < 0.0 {
+                t0 = 0.0;
+                s0 = (-c / a).clamp(0.0, 1.0);
+            } else if t0 > 1.0 {
+                t0 = 1.0;
+                s0 = ((b - c) / a).clamp(0.0, 1.0);
+            }
+            s = s0;
+            t = t0;
+        }
+    }
+    ((p0 + d1 * s) - (q0 + d2 * t)).length()
+}
+
+/// An orthonormal frame of a plane: origin, two in-plane axes and the normal
+/// (`e1 × e2 = n`), for 2-D work on a polygon.
+#[derive(Clone, Copy, Debug)]
+pub struct PlaneFrame {
+    /// A point of the plane.
+    pub origin: DVec3,
+    /// First in-plane axis.
+    pub e1: DVec3,
+    /// Second in-plane axis.
+    pub e2: DVec3,
+    /// Unit normal.
+    pub n: DVec3,
+}
+
+impl PlaneFrame {
+    /// The frame of the plane through `origin` with unit normal `n`.
+    pub fn new(origin: DVec3, n: DVec3) -> Self {
+        let (e1, e2) = crate::sampling::basis(n);
+        PlaneFrame { origin, e1, e2, n }
+    }
+    /// In-plane coordinates of `p`.
+    #[inline]
+    pub fn to_2d(&self, p: DVec3) -> DVec2 {
+        let d = p - self.origin;
+        DVec2::new(d.dot(self.e1), d.dot(self.e2))
+    }
+    /// The point of the plane with coordinates `q`.
+    #[inline]
+    pub fn to_3d(&self, q: DVec2) -> DVec3 {
+        self.origin + self.e1 * q.x + self.e2 * q.y
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gauss_legendre_integrates_polynomials_exactly() {
+        for n in 1..=MAX_GAUSS {
+            let r = gauss_legendre(n);
+            assert_eq!(r.len(), n);
+            let wsum: f64 = r.iter().map(|p| p.1).sum();
+            assert!((wsum - 1.0).abs() < 1e-14, "n={n} {wsum}");
+            let deg = 2 * n - 1;
+            let q: f64 = r.iter().map(|&(x, w)| w * x.powi(deg as i32)).sum();
+            assert!((q - 1.0 / (deg as f64 + 1.0)).abs() < 1e-14, "n={n}");
+        }
+    }
+
+    #[test]
+    fn subtracting_a_square_hole_leaves_the_frame() {
+        let mut s = PieceSet::default();
+        let sq = |a: f64, b: f64| vec![DVec2::new(a, a), DVec2::new(b, a), DVec2::new(b, b), DVec2::new(a, b)];
+        s.push(&sq(0.0, 4.0));
+        let mut out = PieceSet::default();
+        let mut tmp = [Vec::new(), Vec::new()];
+        s.subtract(&sq(1.0, 2.0), 1e-12, 0.0, &mut out, &mut tmp);
+        assert!((out.area() - 15.0).abs() < 1e-12, "{}", out.area());
+        // A cutter covering everything leaves nothing; a disjoint one leaves all.
+        s.subtract(&sq(-1.0, 5.0), 1e-12, 0.0, &mut out, &mut tmp);
+        assert!(out.is_empty());
+        s.subtract(&sq(5.0, 6.0), 1e-12, 0.0, &mut out, &mut tmp);
+        assert!((out.area() - 16.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn segment_distance_cases() {
+        let d = segment_distance(DVec3::ZERO, DVec3::X, DVec3::new(0.5, 1.0, 1.0), DVec3::new(0.5, 1.0, 2.0));
+        assert!((d - 2f64.sqrt()).abs() < 1e-15);
+        let d = segment_distance(DVec3::ZERO, DVec3::X, DVec3::X, DVec3::new(1.0, 1.0, 0.0));
+        assert_eq!(d, 0.0);
+    }
+}

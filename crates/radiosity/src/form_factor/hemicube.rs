@@ -1,0 +1,367 @@
+//! The hemicube (Cohen & Greenberg 1985, "The hemi-cube: a radiosity solution for complex
+//! environments").
+//!
+//! ```text
+//! F_ij ≈ Σ_{pixels p of the hemicube at i's centre showing j} ΔF_p
+//! ```
+//!
+//! A half cube of half-width 1 stands on the sender's centre, oriented by its normal: a
+//! `res × res` top face and four `res × res/2` side faces. Every element in front of the
+//! sender is projected onto the five faces and scan-converted with a depth test into an
+//! item buffer (one element id per pixel); the form factor to `j` is the sum of the
+//! pixels' delta form factors. The classic delta factors are the midpoint values
+//! `ΔA / (π (x² + y² + 1)²)` (top) and `z ΔA / (π (y² + z² + 1)²)` (sides); we precompute
+//! each pixel's *exact* factor instead (the point-to-polygon contour integral of the pixel
+//! square, [`super::kernel`]), so the table sums to 1 to rounding and the only error left
+//! is the method's own:
+//!
+//! - **aliasing**: a pixel is all or nothing, so a receiver's factor is quantised to
+//!   whole pixels (worst for small or distant receivers and at silhouettes; it averages
+//!   out over many senders, which is why per-object factors are much better than single
+//!   element pairs);
+//! - **the point approximation**: the factor is taken from the sender's centre, so pairs
+//!   closer than a few element sizes (neighbours across a shared edge) are off — the
+//!   "proximity" error Cohen & Greenberg discuss; subdividing the sender cures it.
+//!
+//! Both are measured in BENCHMARKS.md (`## Form factors`) against the closed forms. Back
+//! faces of one-sided polygons block but receive nothing; back faces of two-sided
+//! polygons are skipped (their coincident front twin is drawn).
+
+use glam::{DVec2, DVec3};
+
+use super::kernel::point_to_polygon_unsided;
+use super::{Context, RowSource};
+
+/// Default pixels along the top face.
+pub const DEFAULT_RESOLUTION: usize = 128;
+
+/// The delta form factors of one resolution.
+#[derive(Clone, Debug)]
+pub struct DeltaTable {
+    /// Pixels along the top face.
+    pub res: usize,
+    /// Top face, row-major `res × res`, pixel (ix, iy) covers `x, y ∈ [−1 + k·2/res, ...]`.
+    pub top: Vec<f64>,
+    /// One side face (the four are the same), row-major `res × res/2`: column `iu` along the
+    /// face, row `iv` the height `z ∈ [iv·2/res, (iv+1)·2/res]`.
+    pub side: Vec<f64>,
+}
+
+impl DeltaTable {
+    /// Exact per-pixel factors for `res` (even).
+    pub fn new(res: usize) -> Self {
+        let d = 2.0 / res as f64;
+        let h = res / 2;
+        let mut top = vec![0.0; res * res];
+        let mut side = vec![0.0; res * h];
+        let o = DVec3::ZERO;
+        // By symmetry only one quadrant (one half of a side) needs the contour integral.
+        for iy in 0..res {
+            for ix in 0..res {
+                if ix >= h || iy >= h {
+                    continue;
+                }
+                let (x0, y0) = (-1.0 + ix as f64 * d, -1.0 + iy as f64 * d);
+                let sq = [
+                    DVec3::new(x0, y0, 1.0),
+                    DVec3::new(x0 + d, y0, 1.0),
+                    DVec3::new(x0 + d, y0 + d, 1.0),
+                    DVec3::new(x0, y0 + d, 1.0),
+                ];
+                let f = point_to_polygon_unsided(o, DVec3::Z, &sq);
+                for (jx, jy) in [(ix, iy), (res - 1 - ix, iy), (ix, res - 1 - iy), (res - 1 - ix, res - 1 - iy)] {
+                    top[jy * res + jx] = f;
+                }
+            }
+        }
+        for iv in 0..h {
+            for iu in 0..h {
+                let (u0, z0) = (-1.0 + iu as f64 * d, iv as f64 * d);
+                let sq = [
+                    DVec3::new(1.0, u0, z0),
+                    DVec3::new(1.0, u0 + d, z0),
+                    DVec3::new(1.0, u0 + d, z0 + d),
+                    DVec3::new(1.0, u0, z0 + d),
+                ];
+                let f = point_to_polygon_unsided(o, DVec3::Z, &sq);
+                side[iv * res + iu] = f;
+                side[iv * res + (res - 1 - iu)] = f;
+            }
+        }
+        DeltaTable { res, top, side }
+    }
+
+    /// Sum of all five faces' factors (1 up to rounding).
+    pub fn total(&self) -> f64 {
+        self.top.iter().sum::<f64>() + 4.0 * self.side.iter().sum::<f64>()
+    }
+}
+
+/// Face `f` maps local (x, y, z) (z along the sender normal) to (U, V, D): the pixel is at
+/// (U/D, V/D) and D is the depth. Face 0 is the top.
+#[inline]
+fn to_face(f: usize, p: DVec3) -> DVec3 {
+    match f {
+        0 => p,
+        1 => DVec3::new(p.y, p.z, p.x),
+        2 => DVec3::new(p.y, p.z, -p.x),
+        3 => DVec3::new(p.x, p.z, p.y),
+        _ => DVec3::new(p.x, p.z, -p.y),
+    }
+}
+
+pub(crate) struct Rows<'a> {
+    ctx: &'a Context<'a>,
+    table: DeltaTable,
+    two_sided: Vec<bool>,
+}
+
+impl<'a> Rows<'a> {
+    pub fn new(ctx: &'a Context<'a>) -> Self {
+        let scene = ctx.scene;
+        let two_sided =
+            scene.polygons.iter().map(|p| scene.materials[p.material as usize].two_sided).collect();
+        Rows { ctx, table: DeltaTable::new(ctx.opts.hemicube_resolution), two_sided }
+    }
+}
+
+/// Item and inverse-depth buffers of the five faces, accumulation, clip buffers.
+pub(crate) struct Scratch {
+    ids: Vec<u32>,
+    inv_depth: Vec<f64>,
+    acc: Vec<f64>,
+    touched: Vec<u32>,
+    patches: Vec<u32>,
+    cached: u32,
+    a: Vec<DVec3>,
+    b: Vec<DVec3>,
+}
+
+const EMPTY: u32 = u32::MAX;
+/// Set on an item id drawn from its back side (blocks, receives nothing).
+const BACK: u32 = 1 << 31;
+
+impl RowSource for Rows<'_> {
+    type Scratch = Scratch;
+
+    fn scratch(&self) -> Scratch {
+        let r = self.table.res;
+        let pixels = r * r + 4 * r * (r / 2);
+        Scratch {
+            ids: vec![EMPTY; pixels],
+            inv_depth: vec![0.0; pixels],
+            acc: vec![0.0; self.ctx.mesh.len()],
+            touched: Vec::new(),
+            patches: Vec::new(),
+            cached: u32::MAX,
+            a: Vec::new(),
+            b: Vec::new(),
+        }
+    }
+
+    fn row(&self, i: usize, s: &mut Scratch, out: &mut Vec<(u32, f64)>) -> u64 {
+        let ctx = self.ctx;
+        let mesh = ctx.mesh;
+        let ei = &mesh.elements[i];
+        if s.cached != ei.patch {
+            s.cached = ei.patch;
+            patches_in_front(ctx, ei.patch, &mut s.patches);
+        }
+        let res = self.table.res;
+        // The hemicube stands on the element's open representative point (its centroid
+        // unless that lies inside closed geometry); none: the element receives nothing.
+        let Some(&c) = ctx.receivers.points(i, 1).first() else {
+            return 0;
+        };
+        s.ids.fill(EMPTY);
+        s.inv_depth.fill(0.0);
+        let (t, b) = crate::sampling::basis(ei.normal);
+        let n = ei.normal;
+        let local = |p: DVec3| {
+            let d = p - c;
+            DVec3::new(d.dot(t), d.dot(b), d.dot(n))
+        };
+        let near = 1e-12 * ctx.scene.diagonal().max(1e-300);
+        let patches = std::mem::take(&mut s.patches);
+        for &q in &patches {
+            let pe = mesh.patches[q as usize];
+            let facing = ctx.planes[q as usize].1.dot(c - ctx.planes[q as usize].0) > 0.0;
+            if !facing && self.two_sided[q as usize] {
+                continue;
+            }
+            let flag = if facing { 0 } else { BACK };
+            for j in pe.first..pe.first + pe.count {
+                let ej = &mesh.elements[j as usize];
+                let (cj, nv) = ej.corners(&mesh.positions);
+                let mut lp = [DVec3::ZERO; 4];
+                let mut any_above = false;
+                for k in 0..nv {
+                    lp[k] = local(cj[k]);
+                    any_above |= lp[k].z > near;
+                }
+                if !any_above {
+                    continue;
+                }
+                let ln = DVec3::new(ej.normal.dot(t), ej.normal.dot(b), ej.normal.dot(n));
+                for f in 0..5 {
+                    self.draw(f, &lp[..nv], ln, j | flag, near, s);
+                }
+            }
+        }
+        s.patches = patches;
+        // Sum the delta factors per front-facing item.
+        let h = res / 2;
+        for (k, &id) in s.ids.iter().enumerate() {
+            if id == EMPTY || id & BACK != 0 {
+                continue;
+            }
+            let df = if k < res * res {
+                self.table.top[k]
+            } else {
+                let r = (k - res * res) % (res * h);
+                self.table.side[r]
+            };
+            if s.acc[id as usize] == 0.0 {
+                s.touched.push(id);
+            }
+            s.acc[id as usize] += df;
+        }
+        for &j in &s.touched {
+            out.push((j, s.acc[j as usize]));
+            s.acc[j as usize] = 0.0;
+        }
+        s.touched.clear();
+        0
+    }
+}
+
+impl Rows<'_> {
+    /// Clips the element (local coordinates `lp`, local normal `ln`) to face `f`'s view
+    /// volume and scan-converts it with a depth test.
+    fn draw(&self, f: usize, lp: &[DVec3], ln: DVec3, id: u32, near: f64, s: &mut Scratch) {
+        let res = self.table.res;
+        let top = f == 0;
+        // Trivial rejects by outcodes against the face's frustum.
+        let mut all_out = [true; 5];
+        for p in lp {
+            let q = to_face(f, *p);
+            let vmin = if top { -q.z } else { 0.0 };
+            all_out[0] &= q.z <= near;
+            all_out[1] &= q.x > q.z;
+            all_out[2] &= q.x < -q.z;
+            all_out[3] &= q.y > q.z;
+            all_out[4] &= q.y < vmin;
+        }
+        if all_out.iter().any(|&o| o) {
+            return;
+        }
+        s.a.clear();
+        s.a.extend(lp.iter().map(|p| to_face(f, *p)));
+        // Clip to D ≥ near, |U| ≤ D, V ≤ D, V ≥ −D (top) or V ≥ 0 (sides).
+        let planes: [(DVec3, f64); 5] = [
+            (DVec3::new(0.0, 0.0, 1.0), -near),
+            (DVec3::new(-1.0, 0.0, 1.0), 0.0),
+            (DVec3::new(1.0, 0.0, 1.0), 0.0),
+            (DVec3::new(0.0, -1.0, 1.0), 0.0),
+            if top { (DVec3::new(0.0, 1.0, 1.0), 0.0) } else { (DVec3::new(0.0, 1.0, 0.0), 0.0) },
+        ];
+        for (pn, off) in planes {
+            super::geom::clip_halfspace(&s.a, |p| pn.dot(p) + off, 0.0, &mut s.b);
+            std::mem::swap(&mut s.a, &mut s.b);
+            if s.a.is_empty() {
+                return;
+            }
+        }
+        // Inverse depth 1/D is affine in (u, v): with the plane m·P = h (face coordinates),
+        // a pixel ray P = D·(u, v, 1) meets it at 1/D = (m_u u + m_v v + m_d) / h.
+        let m = to_face(f, ln);
+        let hp = m.dot(s.a[0]);
+        if hp.abs() <= 0.0 {
+            return; // seen edge-on
+        }
+        let (au, av, ad) = (m.x / hp, m.y / hp, m.z / hp);
+        let mut pts = [DVec2::ZERO; 16];
+        let np = s.a.len().min(16);
+        for k in 0..np {
+            let p = s.a[k];
+            pts[k] = DVec2::new(p.x / p.z, p.y / p.z);
+        }
+        let pts = &pts[..np];
+        let d = 2.0 / res as f64;
+        let (rows, v0, base) = if top { (res, -1.0, 0) } else { (res / 2, 0.0, res * res + (f - 1) * res * (res / 2)) };
+        let (mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY);
+        for p in pts {
+            vmin = vmin.min(p.y);
+            vmax = vmax.max(p.y);
+        }
+        let iy0 = (((vmin - v0) / d - 0.5).ceil().max(0.0)) as usize;
+        let iy1 = ((((vmax - v0) / d - 0.5).floor()) as i64).min(rows as i64 - 1);
+        if iy1 < iy0 as i64 {
+            return;
+        }
+        for iy in iy0..=iy1 as usize {
+            let vc = v0 + (iy as f64 + 0.5) * d;
+            // Span of the convex polygon on this scanline.
+            let (mut ul, mut ur) = (f64::INFINITY, f64::NEG_INFINITY);
+            for k in 0..np {
+                let (p, q) = (pts[k], pts[(k + 1) % np]);
+                if (p.y <= vc && q.y >= vc) || (q.y <= vc && p.y >= vc) {
+                    let u = if q.y == p.y { p.x.min(q.x) } else { p.x + (q.x - p.x) * (vc - p.y) / (q.y - p.y) };
+                    let u2 = if q.y == p.y { p.x.max(q.x) } else { u };
+                    ul = ul.min(u);
+                    ur = ur.max(u2);
+                }
+            }
+            if !(ul <= ur) {
+                continue;
+            }
+            // Pixel centres in [ul, ur).
+            let ix0 = (((ul + 1.0) / d - 0.5).ceil().max(0.0)) as usize;
+            let ix1 = (((ur + 1.0) / d - 0.5).ceil() as i64 - 1).min(res as i64 - 1);
+            if ix1 < ix0 as i64 {
+                continue;
+            }
+            let row = base + iy * res;
+            for ix in ix0..=ix1 as usize {
+                let uc = -1.0 + (ix as f64 + 0.5) * d;
+                let w = au * uc + av * vc + ad;
+                let k = row + ix;
+                if w > s.inv_depth[k] {
+                    s.inv_depth[k] = w;
+                    s.ids[k] = id;
+                }
+            }
+        }
+    }
+}
+
+/// Patches with some vertex strictly in front of patch `pi`'s plane (everything that can
+/// be seen from it, facing it or not).
+fn patches_in_front(ctx: &Context, pi: u32, out: &mut Vec<u32>) {
+    out.clear();
+    let (ci, ni) = ctx.planes[pi as usize];
+    for (q, poly) in ctx.scene.polygons.iter().enumerate() {
+        if q as u32 != pi && poly.vertices.iter().any(|v| ni.dot(*v - ci) > ctx.eps) {
+            out.push(q as u32);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exact_delta_factors_sum_to_one() {
+        for res in [2, 8, 64] {
+            let t = DeltaTable::new(res);
+            assert!((t.total() - 1.0).abs() < 1e-13, "res {res}: {}", t.total());
+        }
+        // The classic midpoint value is close for a small pixel near the zenith.
+        let t = DeltaTable::new(256);
+        let d: f64 = 2.0 / 256.0;
+        let x = -1.0 + 128.5 * d;
+        let mid = d * d / (std::f64::consts::PI * (x * x + x * x + 1.0).powi(2));
+        assert!((t.top[128 * 256 + 128] - mid).abs() < 1e-4 * mid);
+    }
+}
