@@ -34,11 +34,11 @@ if [ "$what" = cornell ] || [ "$what" = all ]; then
   if [ ! -f "$C" ]; then echo "skipping Cornell: $C not found" >&2; else
     for run in $(seq "$runs"); do
       one "cornell adaptive polygons" "$C" --per object --method adaptive -o "$OUT/F.json" --compare "$R"
-      for s in 56 28 14; do
+      for s in 48 24 12; do
         for m in hemicube point-sampled monte-carlo analytic; do
           one "cornell $m mesh $s" "$C" --per object --method $m --mesh-size $s -o "$OUT/F.json" --compare "$R"
         done
-        if [ "$s" != 14 ]; then
+        if [ "$s" != 12 ]; then
           one "cornell adaptive tol1e-3 mesh $s" "$C" --per object --method adaptive --ff-tolerance 1e-3 --mesh-size $s -o "$OUT/F.json" --compare "$R"
         fi
       done
