@@ -11,6 +11,9 @@ pub fn encode_rgb8(width: usize, height: usize, rgb: &[u8]) -> Result<Vec<u8>> {
         enc.set_color(png::ColorType::Rgb);
         enc.set_depth(png::BitDepth::Eight);
         enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+        // fdeflate: several times faster than the default level for ~10 % larger files,
+        // which matters when every view or frame is written.
+        enc.set_compression(png::Compression::Fast);
         let mut w = enc.write_header().map_err(|e| Error::Invalid(format!("PNG encoding: {e}")))?;
         w.write_image_data(rgb).map_err(|e| Error::Invalid(format!("PNG encoding: {e}")))?;
     }
