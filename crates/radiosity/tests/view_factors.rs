@@ -97,6 +97,22 @@ fn point_sampled_every_reference_case_to_half_a_percent() {
     check_all(Method::PointSampled, 5e-3, |_| {});
 }
 
+/// The disks as a user gives them (one 256-gon each, default mesh): refined Delaunay
+/// triangles, not a fan of k² slivers per fan triangle (~73k elements per disk before).
+#[test]
+fn default_meshed_disks_are_compact_and_accurate() {
+    for c in cases().into_iter().filter(|c| matches!(c.kind, Kind::Disks { .. })) {
+        let exact = c.kind.exact();
+        for (method, tol) in [(Method::PointSampled, 5e-3), (Method::MonteCarlo, 5e-3)] {
+            let vf = run(c.kind.scene(), method, None, |_| {});
+            let f = vf.matrix.get(0, 1);
+            let rel = ((f - exact) / exact).abs();
+            assert!(rel <= tol, "{} {}: F = {f:.9} vs {exact:.9} ({rel:.2e})", method.name(), c.label);
+            assert!(vf.elements < 8_000, "{}: {} elements", c.label, vf.elements);
+        }
+    }
+}
+
 #[test]
 fn hemicube_every_reference_case_to_two_percent() {
     check_all(Method::Hemicube, 2e-2, |_| {});

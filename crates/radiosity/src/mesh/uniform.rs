@@ -1,4 +1,10 @@
 //! Uniform subdivision of every patch to a target element size.
+//!
+//! Quadrilaterals become `nu × nv` grids and triangles the k² similar triangles of a
+//! structured grid, so neighbouring elements of one patch share vertices. Polygons with more
+//! than four vertices are cut as a fan with a common k, unless that fan would be slivers
+//! (a many-sided disk): those are meshed by Delaunay refinement (Ruppert 1995; Chew 1993)
+//! in their plane, with `spade`.
 
 use std::collections::HashMap;
 
@@ -19,13 +25,12 @@ pub fn count_uniform(scene: &Scene, size: f64) -> u64 {
             let nv = steps((v[3] - v[0]).length().max((v[2] - v[1]).length()));
             nu.saturating_mul(nv)
         } else {
-            let mut longest: f64 = 0.0;
-            for k in 1..v.len() - 1 {
-                let (a, b, c) = (v[0], v[k], v[k + 1]);
-                longest = longest.max((b - a).length()).max((c - b).length()).max((a - c).length());
+            let k = fan_steps(v, size) as u64;
+            let fan = k.saturating_mul(k).saturating_mul(v.len() as u64 - 2);
+            match delaunay_estimate(v, poly.normal, size, fan) {
+                Some(estimate) => estimate,
+                None => fan,
             }
-            let k = steps(longest);
-            k.saturating_mul(k).saturating_mul(v.len() as u64 - 2)
         };
         total = total.saturating_add(n);
     }
@@ -57,16 +62,13 @@ pub fn mesh_uniform(scene: &Scene, size: f64) -> Mesh {
                     b.push(&[p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1)]);
                 }
             }
+        } else if delaunay_estimate(v, poly.normal, size, fan_count(v, size)).is_some()
+            && delaunay(&mut b, v, poly.normal, size)
+        {
+            // Many-sided polygon (a disk, a rounded outline): refined Delaunay triangles.
         } else {
             // Fan triangles (a triangle is its own fan) with a common k.
-            let mut longest: f64 = 0.0;
-            for k in 1..v.len() - 1 {
-                let (a, bb, c) = (v[0], v[k], v[k + 1]);
-                longest = longest.max((bb - a).length()).max((c - bb).length()).max((a - c).length());
-            }
-            // A quad element's longest extent is its diagonal, size·√2; give triangle
-            // elements the same.
-            let k = steps(longest / std::f64::consts::SQRT_2);
+            let k = fan_steps(v, size);
             for f in 1..v.len() - 1 {
                 let (a, e1, e2) = (v[0], v[f] - v[0], v[f + 1] - v[0]);
                 let p = |i: usize, j: usize| a + e1 * (i as f64 / k as f64) + e2 * (j as f64 / k as f64);
@@ -84,6 +86,99 @@ pub fn mesh_uniform(scene: &Scene, size: f64) -> Mesh {
         mesh.patches.push(PatchElements { first, count });
     }
     mesh
+}
+
+/// The common subdivision count of a polygon's fan triangles: a quad element's longest
+/// extent is its diagonal, size·√2, and triangle elements get the same.
+fn fan_steps(v: &[DVec3], size: f64) -> usize {
+    let mut longest: f64 = 0.0;
+    for k in 1..v.len() - 1 {
+        let (a, b, c) = (v[0], v[k], v[k + 1]);
+        longest = longest.max((b - a).length()).max((c - b).length()).max((a - c).length());
+    }
+    ((longest / std::f64::consts::SQRT_2 / size).ceil()).clamp(1.0, 100_000.0) as usize
+}
+
+fn fan_count(v: &[DVec3], size: f64) -> u64 {
+    let k = fan_steps(v, size) as u64;
+    k.saturating_mul(k).saturating_mul(v.len() as u64 - 2)
+}
+
+/// Polygons with more than four vertices whose fan would be made of slivers (a 256-gon
+/// disk: every fan triangle spans the diameter and is cut into k² thinner slivers, ~80×
+/// the elements its area needs) are meshed by constrained Delaunay refinement instead
+/// (Ruppert/Chew, the `spade` crate): triangles of area ≤ size²/2 (half a size × size
+/// square, as the fan's) and no angle below 20° except at input corners. Returns the
+/// expected element count when that applies: 2·area/size² plus one per boundary vertex.
+fn delaunay_estimate(v: &[DVec3], normal: DVec3, size: f64, fan: u64) -> Option<u64> {
+    if v.len() <= 4 || !size.is_finite() {
+        return None;
+    }
+    let area = 0.5 * crate::scene::newell_normal(v).dot(normal).abs();
+    let ideal = 2.0 * area / (size * size);
+    if !(ideal.is_finite()) || ideal < 1.0 {
+        return None;
+    }
+    let estimate = (1.5 * ideal).ceil() as u64 + 2 * v.len() as u64;
+    (fan > 3 * estimate).then_some(estimate)
+}
+
+/// Meshes the convex planar polygon `v` by refined constrained Delaunay triangulation in
+/// its plane; false (nothing pushed) if the refinement cannot finish within its vertex
+/// budget, so the caller falls back to the fan.
+fn delaunay(b: &mut PatchBuilder, v: &[DVec3], normal: DVec3, size: f64) -> bool {
+    use spade::{AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation};
+    let n = normal.normalize();
+    let u = n.any_orthonormal_vector();
+    let w = n.cross(u); // u × w = n: counter-clockwise in (u, w) is the polygon's front
+    let o = v[0];
+    let mut cdt: ConstrainedDelaunayTriangulation<Point2<f64>> = ConstrainedDelaunayTriangulation::new();
+    let mut handles = Vec::with_capacity(v.len());
+    for p in v {
+        let d = *p - o;
+        match cdt.insert(Point2::new(d.dot(u), d.dot(w))) {
+            Ok(h) => handles.push(h),
+            Err(_) => return false,
+        }
+    }
+    for k in 0..handles.len() {
+        let (a, c) = (handles[k], handles[(k + 1) % handles.len()]);
+        if a != c && cdt.can_add_constraint(a, c) {
+            cdt.add_constraint(a, c);
+        }
+    }
+    let area = 0.5 * crate::scene::newell_normal(v).dot(n).abs();
+    let ideal = 2.0 * area / (size * size);
+    let params = RefinementParameters::<f64>::new()
+        .with_max_allowed_area(0.5 * size * size)
+        .with_angle_limit(AngleLimit::from_deg(20.0))
+        .exclude_outer_faces(true)
+        .with_max_additional_vertices((10.0 * ideal) as usize + 20 * v.len());
+    let result = cdt.refine(params);
+    if !result.refinement_complete {
+        return false;
+    }
+    let excluded: std::collections::HashSet<_> = result.excluded_faces.into_iter().collect();
+    // Input corners keep their exact positions; Steiner points come back from the plane.
+    let mut input = std::collections::HashMap::new();
+    for (k, h) in handles.iter().enumerate() {
+        input.entry(h.index()).or_insert(v[k]);
+    }
+    let pos = |vh: spade::handles::VertexHandle<Point2<f64>, (), spade::CdtEdge<()>, ()>| -> DVec3 {
+        if let Some(p) = input.get(&vh.fix().index()) {
+            return *p;
+        }
+        let q = vh.position();
+        o + u * q.x + w * q.y
+    };
+    for f in cdt.inner_faces() {
+        if excluded.contains(&f.fix()) {
+            continue;
+        }
+        let [a, c, d] = f.vertices();
+        b.push(&[pos(a), pos(c), pos(d)]);
+    }
+    true
 }
 
 struct PatchBuilder<'a> {
@@ -165,5 +260,43 @@ mod tests {
             assert!(e.normal.dot(scene.polygons[tri_patch].normal) > 0.999999);
             assert_eq!(e.vertex_count(), 3);
         }
+    }
+    #[test]
+    fn many_sided_polygons_get_compact_delaunay_triangles() {
+        use crate::scene::{MaterialDesc, ObjectDesc, PolygonDesc, SceneDesc};
+        let n = 200;
+        let disk: Vec<DVec3> = (0..n)
+            .map(|i| {
+                let t = std::f64::consts::TAU * i as f64 / n as f64;
+                DVec3::new(t.cos(), t.sin(), 0.0)
+            })
+            .collect();
+        let desc = SceneDesc {
+            materials: vec![MaterialDesc::diffuse("grey", crate::Rgb::splat(0.5))],
+            objects: vec![ObjectDesc { name: "disk".into(), loc: None }],
+            polygons: vec![PolygonDesc { vertices: disk, material: 0, object: 0, loc: None }],
+            ..Default::default()
+        };
+        let scene = Scene::from_desc(desc).unwrap();
+        let size = 0.1;
+        let mesh = mesh_uniform(&scene, size);
+        let poly = &scene.polygons[0];
+        let ideal = 2.0 * poly.area / (size * size); // triangles of half a size × size square
+        let count = mesh.elements.len() as f64;
+        assert!(count >= ideal && count <= 3.0 * ideal, "{count} elements, ideal {ideal}");
+        let est = count_uniform(&scene, size) as f64;
+        assert!(est >= 0.5 * count && est <= 2.0 * count, "estimate {est} vs {count}");
+        let area: f64 = mesh.elements.iter().map(|e| e.area).sum();
+        assert!((area - poly.area).abs() < 1e-9 * poly.area);
+        for e in &mesh.elements {
+            let (c, k) = e.corners(&mesh.positions);
+            assert_eq!(k, 3);
+            // Front side kept (counter-clockwise about the polygon's normal), no slivers.
+            assert!((c[1] - c[0]).cross(c[2] - c[0]).dot(poly.normal) > 0.0);
+            let longest = (c[1] - c[0]).length().max((c[2] - c[1]).length()).max((c[0] - c[2]).length());
+            assert!(longest <= 2.0 * size, "element {longest} long");
+        }
+        // Vertices shared: a triangulation of V vertices has about 2V triangles.
+        assert!((mesh.positions.len() as f64) < 0.7 * count + n as f64);
     }
 }
