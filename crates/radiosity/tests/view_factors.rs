@@ -4,8 +4,8 @@
 //!
 //! Tolerances (the issue's "done means"): analytic ≤ 1e-9 relative; adaptive ≤ 1e-5;
 //! Monte Carlo and point-sampled ≤ 0.5 % at their defaults; hemicube ≤ 2 % at its default
-//! resolution. The CSV prints rectangles to 9 decimals, so those cases are checked against
-//! the closed form evaluated here in f64 (and the CSV against the closed form to its
+//! resolution (asserted at PRODUCT.md's stricter 1 %; measured worst 0.47 %). The CSV
+//! prints rectangles to 9 decimals, so those cases are checked against the closed form evaluated here in f64 (and the CSV against the closed form to its
 //! printed precision); the disks' CSV values are exact for the disks, and a 256-gon of
 //! equal area differs from its disk by up to ~4e-10 (README), well inside 1e-9 relative.
 //!
@@ -115,7 +115,7 @@ fn default_meshed_disks_are_compact_and_accurate() {
 
 #[test]
 fn hemicube_every_reference_case_to_two_percent() {
-    check_all(Method::Hemicube, 2e-2, |_| {});
+    check_all(Method::Hemicube, 1e-2, |_| {}); // PRODUCT.md: 1 %; the issue: 2 %
 }
 
 #[test]
@@ -126,7 +126,7 @@ fn unit_cube_rows_sum_to_one_for_every_method() {
         (Method::Adaptive, 1e-5),
         (Method::MonteCarlo, 5e-3),
         (Method::PointSampled, 5e-3),
-        (Method::Hemicube, 2e-2),
+        (Method::Hemicube, 1e-2),
     ] {
         let cube = vf_common::unit_cube();
         // Hemicube and Monte Carlo on a diag/20 mesh (faster); point-sampled at its default.
