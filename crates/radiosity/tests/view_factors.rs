@@ -7,7 +7,8 @@
 //! resolution (asserted at PRODUCT.md's stricter 1 %; measured worst 0.47 %). The CSV
 //! prints rectangles to 9 decimals, so those cases are checked against the closed form
 //! evaluated here in f64 (and the CSV against the closed form to its printed precision);
-//! the disks' CSV values are exact for the disks, and a 256-gon of equal area differs from its disk by up to ~4e-10 (README), well inside 1e-9 relative.
+//! the disks' CSV values are exact for the disks, and a 256-gon of equal area differs
+//! from its disk by up to ~4e-10 (README), well inside 1e-9 relative.
 //!
 //! Meshes: the element methods (hemicube, point-sampled, Monte Carlo) need the sender cut
 //! into elements; rectangles use the default size (scene diagonal / 40; the hemicube, the
