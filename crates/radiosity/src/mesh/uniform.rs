@@ -299,4 +299,46 @@ mod tests {
         // Vertices shared: a triangulation of V vertices has about 2V triangles.
         assert!((mesh.positions.len() as f64) < 0.7 * count + n as f64);
     }
+    #[test]
+    fn delaunay_meshing_keeps_the_area_of_random_convex_polygons() {
+        use crate::scene::{MaterialDesc, ObjectDesc, PolygonDesc, SceneDesc};
+        // Ellipses with uneven vertex spacing, some nearly collinear runs, at sizes from
+        // a few elements to thousands; every one must keep its area (or fall back to the fan).
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut delaunay_cases = 0;
+        for case in 0..40 {
+            let n = 5 + (rnd() * 300.0) as usize;
+            let (a, b) = (0.2 + 3.0 * rnd(), 0.2 + 3.0 * rnd());
+            let mut ts: Vec<f64> = (0..n).map(|_| rnd() * std::f64::consts::TAU).collect();
+            ts.sort_by(|x, y| x.partial_cmp(y).unwrap());
+            ts.dedup_by(|x, y| (*x - *y).abs() < 1e-6);
+            let poly: Vec<DVec3> = ts.iter().map(|t| DVec3::new(a * t.cos(), b * t.sin(), 0.5 * a * t.cos())).collect();
+            let desc = SceneDesc {
+                materials: vec![MaterialDesc::diffuse("grey", crate::Rgb::splat(0.5))],
+                objects: vec![ObjectDesc { name: "p".into(), loc: None }],
+                polygons: vec![PolygonDesc { vertices: poly, material: 0, object: 0, loc: None }],
+                ..Default::default()
+            };
+            let Ok(scene) = Scene::from_desc(desc) else { continue };
+            let size = a.max(b) * (0.02 + 0.5 * rnd());
+            let mesh = mesh_uniform(&scene, size);
+            let v = &scene.polygons[0].vertices;
+            if delaunay_estimate(v, scene.polygons[0].normal, size, fan_count(v, size)).is_some() {
+                delaunay_cases += 1;
+            }
+            let want: f64 = scene.polygons.iter().map(|p| p.area).sum();
+            let got: f64 = mesh.elements.iter().map(|e| e.area).sum();
+            assert!((got - want).abs() <= 1e-9 * want, "case {case}: n {n}, size {size}: area {got} vs {want}");
+            for e in &mesh.elements {
+                assert!(e.area > 0.0 && e.centroid.is_finite());
+            }
+        }
+        assert!(delaunay_cases >= 10, "only {delaunay_cases} cases took the Delaunay path");
+    }
 }
