@@ -228,49 +228,37 @@ impl Job {
         }
         let nw = work.len();
         let mut m = DenseMatrix::zeros(nw, memory_limit, "the view-factor matrix")?;
-        let stats = if self.polygon_rows {
-            let of = &self.groups.of_polygon;
-            let polys = &self.scene.polygons;
-            let rows: Vec<u32> = (0..polys.len() as u32).filter(|&p| slot[of[p as usize] as usize] != usize::MAX).collect();
-            form_factor::for_each_polygon_row(
-                &self.scene,
-                &self.rays,
-                &self.settings.form_factors,
-                Some(&rows),
-                progress,
-                &mut |p, row| {
-                    let out = m.row_mut(slot[of[p] as usize]);
-                    for &(q, f) in row {
-                        let c = slot[of[q as usize] as usize];
-                        if c != usize::MAX {
-                            out[c] += polys[p].area * f;
-                        }
-                    }
-                    Ok(())
-                },
-            )?
+        // Rows are the input polygons (area-to-area methods per object) or the elements;
+        // each is added, weighted by its area, into its group's row.
+        let (of, areas): (&[u32], Vec<f64>) = if self.polygon_rows {
+            (&self.groups.of_polygon, self.scene.polygons.iter().map(|p| p.area).collect())
         } else {
-            let of = &self.groups.of_element;
-            let elems = &self.mesh.elements;
-            let rows: Vec<u32> = (0..elems.len() as u32).filter(|&e| slot[of[e as usize] as usize] != usize::MAX).collect();
+            (&self.groups.of_element, self.mesh.elements.iter().map(|e| e.area).collect())
+        };
+        let rows: Vec<u32> = (0..of.len() as u32).filter(|&i| slot[of[i as usize] as usize] != usize::MAX).collect();
+        let mut sink = |i: usize, row: &[(u32, f64)]| {
+            let out = m.row_mut(slot[of[i] as usize]);
+            for &(j, f) in row {
+                let c = slot[of[j as usize] as usize];
+                if c != usize::MAX {
+                    out[c] += areas[i] * f;
+                }
+            }
+            Ok(())
+        };
+        let opts = &self.settings.form_factors;
+        let stats = if self.polygon_rows {
+            form_factor::for_each_polygon_row(&self.scene, &self.rays, opts, Some(&rows), progress, &mut sink)?
+        } else {
             form_factor::for_each_row(
                 &self.scene,
                 &self.mesh,
                 &self.rays,
                 &self.receivers,
-                &self.settings.form_factors,
+                opts,
                 Some(&rows),
                 progress,
-                &mut |i, row| {
-                    let out = m.row_mut(slot[of[i] as usize]);
-                    for &(j, f) in row {
-                        let c = slot[of[j as usize] as usize];
-                        if c != usize::MAX {
-                            out[c] += elems[i].area * f;
-                        }
-                    }
-                    Ok(())
-                },
+                &mut sink,
             )?
         };
         let work_areas: Vec<f64> = work.iter().map(|&g| self.groups.areas[g]).collect();
