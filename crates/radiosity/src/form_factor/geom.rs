@@ -58,14 +58,22 @@ fn gl_nodes(n: usize) -> Vec<(f64, f64)> {
 /// `|dist| <= eps` count as on the plane and are kept.
 pub fn clip_halfspace(poly: &[DVec3], dist: impl Fn(DVec3) -> f64, eps: f64, out: &mut Vec<DVec3>) {
     out.clear();
-    let m = poly.len();
-    if m == 0 {
-        return;
-    }
-    let mut dprev = snap(dist(poly[m - 1]), eps);
-    let mut prev = poly[m - 1];
+    clip_append(poly, |p| snap(dist(p), eps), out);
+}
+
+/// One Sutherland–Hodgman step: appends to `out` the part of the convex polygon `poly`
+/// where `d >= 0` (`d` already snapped to 0 on the boundary); returns how many vertices it
+/// appended, or 0 (and appends nothing) when fewer than 3 remain.
+#[inline]
+fn clip_append<T>(poly: &[T], d: impl Fn(T) -> f64, out: &mut Vec<T>) -> usize
+where
+    T: Copy + std::ops::Add<Output = T> + std::ops::Sub<Output = T> + std::ops::Mul<f64, Output = T>,
+{
+    let start = out.len();
+    let Some(&last) = poly.last() else { return 0 };
+    let (mut prev, mut dprev) = (last, d(last));
     for &cur in poly {
-        let dcur = snap(dist(cur), eps);
+        let dcur = d(cur);
         if (dprev > 0.0 && dcur < 0.0) || (dprev < 0.0 && dcur > 0.0) {
             let t = dprev / (dprev - dcur);
             out.push(prev + (cur - prev) * t);
@@ -76,8 +84,12 @@ pub fn clip_halfspace(poly: &[DVec3], dist: impl Fn(DVec3) -> f64, eps: f64, out
         prev = cur;
         dprev = dcur;
     }
-    if out.len() < 3 {
-        out.clear();
+    let n = out.len() - start;
+    if n < 3 {
+        out.truncate(start);
+        0
+    } else {
+        n
     }
 }
 
@@ -108,39 +120,9 @@ pub fn area_3d(p: &[DVec3]) -> f64 {
 /// Clips a convex 2-D polygon to the left of the directed line `a → b` (`side = 1`) or to
 /// its right (`side = -1`), appending to `out` (not cleared).
 fn clip_line_2d(poly: &[DVec2], a: DVec2, b: DVec2, side: f64, eps: f64, out: &mut Vec<DVec2>) -> usize {
-    let start = out.len();
     let e = b - a;
     let len = e.length();
-    let d = |p: DVec2| {
-        let v = side * e.perp_dot(p - a) / len;
-        if v.abs() <= eps {
-            0.0
-        } else {
-            v
-        }
-    };
-    let m = poly.len();
-    let mut prev = poly[m - 1];
-    let mut dprev = d(prev);
-    for &cur in poly {
-        let dcur = d(cur);
-        if (dprev > 0.0 && dcur < 0.0) || (dprev < 0.0 && dcur > 0.0) {
-            let t = dprev / (dprev - dcur);
-            out.push(prev + (cur - prev) * t);
-        }
-        if dcur >= 0.0 {
-            out.push(cur);
-        }
-        prev = cur;
-        dprev = dcur;
-    }
-    let n = out.len() - start;
-    if n < 3 {
-        out.truncate(start);
-        0
-    } else {
-        n
-    }
+    clip_append(poly, |p| snap(side * e.perp_dot(p - a) / len, eps), out)
 }
 
 /// A set of disjoint convex 2-D polygons stored flat (one buffer, ranges).
