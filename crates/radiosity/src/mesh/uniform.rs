@@ -25,11 +25,9 @@ pub fn count_uniform(scene: &Scene, size: f64) -> u64 {
             let nv = steps((v[3] - v[0]).length().max((v[2] - v[1]).length()));
             nu.saturating_mul(nv)
         } else {
-            let k = fan_steps(v, size) as u64;
-            let fan = k.saturating_mul(k).saturating_mul(v.len() as u64 - 2);
-            match delaunay_estimate(v, poly.normal, size, fan) {
-                Some(estimate) => estimate,
-                None => fan,
+            match plan(poly, size) {
+                Plan::Fan(k) => (k as u64).saturating_mul(k as u64).saturating_mul(v.len() as u64 - 2),
+                Plan::Delaunay(estimate) => estimate,
             }
         };
         total = total.saturating_add(n);
@@ -40,8 +38,9 @@ pub fn count_uniform(scene: &Scene, size: f64) -> u64 {
 /// Subdivides every polygon of `scene` into elements no larger than `size` (scene units)
 /// along any edge of a quadrilateral, and no longer than `size·√2` (the diagonal of a
 /// `size × size` square) along any edge of a triangle: a right triangle cut to `size` along
-/// its hypotenuse would get four times the elements of the square it is half of. `size <= 0` or non-finite leaves each polygon whole (one element per
-/// triangle/quad, fans for larger polygons).
+/// its hypotenuse would get four times the elements of the square it is half of.
+/// `size <= 0` or non-finite leaves each polygon whole (one element per triangle/quad, fans
+/// for larger polygons).
 pub fn mesh_uniform(scene: &Scene, size: f64) -> Mesh {
     let size = if size.is_finite() && size > 0.0 { size } else { f64::INFINITY };
     let mut mesh = Mesh { target_size: size, ..Default::default() };
@@ -62,30 +61,36 @@ pub fn mesh_uniform(scene: &Scene, size: f64) -> Mesh {
                     b.push(&[p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1)]);
                 }
             }
-        } else if delaunay_estimate(v, poly.normal, size, fan_count(v, size)).is_some()
-            && delaunay(&mut b, v, poly.normal, size)
-        {
-            // Many-sided polygon (a disk, a rounded outline): refined Delaunay triangles.
         } else {
-            // Fan triangles (a triangle is its own fan) with a common k.
-            let k = fan_steps(v, size);
-            for f in 1..v.len() - 1 {
-                let (a, e1, e2) = (v[0], v[f] - v[0], v[f + 1] - v[0]);
-                let p = |i: usize, j: usize| a + e1 * (i as f64 / k as f64) + e2 * (j as f64 / k as f64);
-                for j in 0..k {
-                    for i in 0..k - j {
-                        b.push(&[p(i, j), p(i + 1, j), p(i, j + 1)]);
-                        if i + j + 1 < k {
-                            b.push(&[p(i + 1, j), p(i + 1, j + 1), p(i, j + 1)]);
-                        }
-                    }
-                }
+            match plan(poly, size) {
+                // Many-sided polygon (a disk, a rounded outline): refined Delaunay
+                // triangles, or the fan if the refinement runs out of its vertex budget.
+                Plan::Delaunay(estimate) if delaunay(&mut b, v, poly.normal, size, estimate) => {}
+                Plan::Delaunay(_) => fan(&mut b, v, fan_steps(v, size)),
+                Plan::Fan(k) => fan(&mut b, v, k),
             }
         }
         let count = mesh.elements.len() as u32 - first;
         mesh.patches.push(PatchElements { first, count });
     }
     mesh
+}
+
+/// Fan triangles from `v[0]` (a triangle is its own fan), each cut into k² triangles with a
+/// common k, so the fan edges conform.
+fn fan(b: &mut PatchBuilder, v: &[DVec3], k: usize) {
+    for f in 1..v.len() - 1 {
+        let (a, e1, e2) = (v[0], v[f] - v[0], v[f + 1] - v[0]);
+        let p = |i: usize, j: usize| a + e1 * (i as f64 / k as f64) + e2 * (j as f64 / k as f64);
+        for j in 0..k {
+            for i in 0..k - j {
+                b.push(&[p(i, j), p(i + 1, j), p(i, j + 1)]);
+                if i + j + 1 < k {
+                    b.push(&[p(i + 1, j), p(i + 1, j + 1), p(i, j + 1)]);
+                }
+            }
+        }
+    }
 }
 
 /// The common subdivision count of a polygon's fan triangles: a quad element's longest
@@ -99,34 +104,43 @@ fn fan_steps(v: &[DVec3], size: f64) -> usize {
     ((longest / std::f64::consts::SQRT_2 / size).ceil()).clamp(1.0, 100_000.0) as usize
 }
 
-fn fan_count(v: &[DVec3], size: f64) -> u64 {
-    let k = fan_steps(v, size) as u64;
-    k.saturating_mul(k).saturating_mul(v.len() as u64 - 2)
+/// How a polygon other than a quad is cut.
+enum Plan {
+    /// Fan triangles, each into k² triangles.
+    Fan(usize),
+    /// Refined Delaunay triangles, about this many.
+    Delaunay(u64),
 }
 
 /// Polygons with more than four vertices whose fan would be made of slivers (a 256-gon
 /// disk: every fan triangle spans the diameter and is cut into k² thinner slivers, ~80×
 /// the elements its area needs) are meshed by constrained Delaunay refinement instead
 /// (Ruppert/Chew, the `spade` crate): triangles of area ≤ size²/2 (half a size × size
-/// square, as the fan's) and no angle below 20° except at input corners. Returns the
-/// expected element count when that applies: 2·area/size² plus one per boundary vertex.
-fn delaunay_estimate(v: &[DVec3], normal: DVec3, size: f64, fan: u64) -> Option<u64> {
+/// square, as the fan's) and no angle below 20° except at input corners; expected count
+/// 1.5 × 2·area/size² plus two per boundary vertex.
+fn plan(poly: &crate::scene::Polygon, size: f64) -> Plan {
+    let v = &poly.vertices;
+    let k = fan_steps(v, size);
     if v.len() <= 4 || !size.is_finite() {
-        return None;
+        return Plan::Fan(k);
     }
-    let area = 0.5 * crate::scene::newell_normal(v).dot(normal).abs();
-    let ideal = 2.0 * area / (size * size);
-    if !(ideal.is_finite()) || ideal < 1.0 {
-        return None;
+    let ideal = 2.0 * poly.area / (size * size);
+    if !ideal.is_finite() || ideal < 1.0 {
+        return Plan::Fan(k);
     }
     let estimate = (1.5 * ideal).ceil() as u64 + 2 * v.len() as u64;
-    (fan > 3 * estimate).then_some(estimate)
+    let fan = (k as u64).saturating_mul(k as u64).saturating_mul(v.len() as u64 - 2);
+    if fan > 3 * estimate {
+        Plan::Delaunay(estimate)
+    } else {
+        Plan::Fan(k)
+    }
 }
 
 /// Meshes the convex planar polygon `v` by refined constrained Delaunay triangulation in
 /// its plane; false (nothing pushed) if the refinement cannot finish within its vertex
 /// budget, so the caller falls back to the fan.
-fn delaunay(b: &mut PatchBuilder, v: &[DVec3], normal: DVec3, size: f64) -> bool {
+fn delaunay(b: &mut PatchBuilder, v: &[DVec3], normal: DVec3, size: f64, estimate: u64) -> bool {
     use spade::{AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation};
     let n = normal.normalize();
     let u = n.any_orthonormal_vector();
@@ -147,13 +161,11 @@ fn delaunay(b: &mut PatchBuilder, v: &[DVec3], normal: DVec3, size: f64) -> bool
             cdt.add_constraint(a, c);
         }
     }
-    let area = 0.5 * crate::scene::newell_normal(v).dot(n).abs();
-    let ideal = 2.0 * area / (size * size);
     let params = RefinementParameters::<f64>::new()
         .with_max_allowed_area(0.5 * size * size)
         .with_angle_limit(AngleLimit::from_deg(20.0))
         .exclude_outer_faces(true)
-        .with_max_additional_vertices((10.0 * ideal) as usize + 20 * v.len());
+        .with_max_additional_vertices(10 * estimate as usize);
     let result = cdt.refine(params);
     if !result.refinement_complete {
         return false;
@@ -328,8 +340,7 @@ mod tests {
             let Ok(scene) = Scene::from_desc(desc) else { continue };
             let size = a.max(b) * (0.02 + 0.5 * rnd());
             let mesh = mesh_uniform(&scene, size);
-            let v = &scene.polygons[0].vertices;
-            if delaunay_estimate(v, scene.polygons[0].normal, size, fan_count(v, size)).is_some() {
+            if matches!(plan(&scene.polygons[0], size), Plan::Delaunay(_)) {
                 delaunay_cases += 1;
             }
             let want: f64 = scene.polygons.iter().map(|p| p.area).sum();
