@@ -141,6 +141,18 @@ pub(crate) struct Scratch {
     b: Vec<DVec3>,
 }
 
+impl Scratch {
+    /// Depth of the nearest thing drawn in the buffers (∞ if none).
+    fn nearest(&self) -> f64 {
+        let most = self.inv_depth.iter().fold(0.0f64, |m, &w| m.max(w));
+        if most > 0.0 {
+            1.0 / most
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
 const EMPTY: u32 = u32::MAX;
 /// Set on an item id drawn from its back side (blocks, receives nothing).
 const BACK: u32 = 1 << 31;
@@ -176,26 +188,24 @@ impl RowSource for Rows<'_> {
         let Some(&c) = ctx.receivers.points(i, 1).first() else {
             return 0;
         };
-        let nearest = self.render(i, c, s);
+        self.render(i, c, s);
+        let nearest = s.nearest();
         // Proximity: a surface closer to the centre than the element's own size (a wall
         // across a corner, a lamp beside its housing) gets a point factor far from the
         // element's area average — summed over receivers, the excess can exceed what the
         // neighbour emits, i.e. create energy. Average hemicubes over the element's k × k
         // open points instead (Cohen & Greenberg's cure: subdividing the sender).
         let k = ctx.opts.max_receiver_samples.min(crate::mesh::coverage::MAX_K);
-        if k > 1 && nearest < PROXIMITY * ei.area.sqrt() {
-            let pts = ctx.receivers.points(i, k);
-            if pts.len() > 1 {
-                let w = 1.0 / pts.len() as f64;
-                for &p in pts {
-                    self.render(i, p, s);
-                    self.accumulate(s, w);
-                }
-                self.flush(s, out);
-                return 0;
+        let pts = if k > 1 && nearest < PROXIMITY * ei.area.sqrt() { ctx.receivers.points(i, k) } else { &[] };
+        if pts.len() > 1 {
+            let w = 1.0 / pts.len() as f64;
+            for &p in pts {
+                self.render(i, p, s);
+                self.accumulate(s, w);
             }
+        } else {
+            self.accumulate(s, 1.0);
         }
-        self.accumulate(s, 1.0);
         self.flush(s, out);
         0
     }
@@ -203,8 +213,8 @@ impl RowSource for Rows<'_> {
 
 impl Rows<'_> {
     /// Draws every element in front of element `i` into the five faces of a hemicube
-    /// standing on `c`; returns the depth of the nearest thing drawn (∞ if none).
-    fn render(&self, i: usize, c: DVec3, s: &mut Scratch) -> f64 {
+    /// standing on `c`.
+    fn render(&self, i: usize, c: DVec3, s: &mut Scratch) {
         let ctx = self.ctx;
         let mesh = ctx.mesh;
         let ei = &mesh.elements[i];
@@ -244,8 +254,6 @@ impl Rows<'_> {
             }
         }
         s.patches = patches;
-        let most = s.inv_depth.iter().fold(0.0f64, |m, &w| m.max(w));
-        if most > 0.0 { 1.0 / most } else { f64::INFINITY }
     }
 
     /// Adds `weight` × the delta factors of the front-facing items in the buffers.
