@@ -250,10 +250,11 @@ pub fn energy_summary(e: &radiosity::report::EnergyReport) -> String {
     let emitted = lum(e.emitted).max(f64::MIN_POSITIVE);
     let pct = |c: [f64; 3]| 100.0 * lum(c) / emitted;
     format!(
-        "energy: emitted {:.4e} = absorbed {:.2} % + escaped {:.2} % + unshot {:.2} % (imbalance {:.1e})",
+        "energy: emitted {:.4e} = absorbed {:.2} % + escaped {:.2} % + back faces {:.2} % + unshot {:.2} % (imbalance {:.1e})",
         lum(e.emitted),
         pct(e.absorbed),
         pct(e.escaped),
+        pct(e.back_faces),
         pct(e.unshot),
         e.imbalance
     )

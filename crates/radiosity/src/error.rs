@@ -80,6 +80,17 @@ pub enum Error {
     /// The user interrupted the work before any usable result existed.
     #[error("interrupted")]
     Cancelled,
+    /// A solve that diverged or met a non-finite value: the cause and the worst elements
+    /// (`places`: where their polygons were defined, filled in by the pipeline).
+    #[error("{why}{}", if places.is_empty() { String::new() } else { format!("; worst polygons: {}", places.join(", ")) })]
+    Diverged {
+        /// What happened, in words.
+        why: String,
+        /// The elements with the largest values, worst first.
+        elements: Vec<usize>,
+        /// Their source polygons (`file:line`), when known.
+        places: Vec<String>,
+    },
 }
 
 impl Error {

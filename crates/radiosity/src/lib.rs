@@ -21,6 +21,7 @@
 #![deny(unsafe_code)]
 
 pub mod accel;
+pub mod back_faces;
 pub mod error;
 pub mod form_factor;
 pub mod mesh;

@@ -76,6 +76,8 @@ pub struct Solved {
     pub timings: Timings,
     /// Adaptive refinement, pass by pass (empty for a uniform mesh).
     pub refinement: Vec<mesh::adaptive::PassStats>,
+    /// Warnings about the solution (e.g. light lost into back faces).
+    pub warnings: Vec<String>,
 }
 
 /// Called after solver iterations with the scene and mesh being solved and the state
@@ -91,6 +93,18 @@ pub fn element_materials(scene: &Scene, mesh: &Mesh) -> (Vec<Rgb>, Vec<Rgb>) {
             (m.reflectance, m.exitance())
         })
         .unzip()
+}
+
+/// Where element `i` comes from, for messages: `file:line (object 'name')`.
+pub fn element_place(scene: &Scene, mesh: &Mesh, i: usize) -> String {
+    let Some(e) = mesh.elements.get(i) else { return format!("element {i}") };
+    let p = &scene.polygons[e.patch as usize];
+    let obj = scene.objects.get(p.object as usize).map_or("?", |o| o.name.as_str());
+    let side = if p.back_side { ", back side" } else { "" };
+    match &p.loc {
+        Some(l) => format!("{l} (object '{obj}'{side})"),
+        None => format!("polygon {} (object '{obj}'{side})", e.patch),
+    }
 }
 
 /// Everything up to the solver: mesh, rays, and the form factors (deterministic solvers
@@ -215,19 +229,41 @@ impl Prepared {
             }
             None => None,
         };
-        if solver.is_stochastic() {
+        let result = if solver.is_stochastic() {
             let sys = RaySystem { mesh, rays: &self.rays, reflectance: &self.reflectance, emission: &self.emission };
             solve::stochastic::solve(solver, &sys, opts, progress, observer)
         } else {
             let transport = self.transport.as_ref().ok_or_else(|| Error::Invalid("solve without form factors".into()))?;
             let sys = System { transport, reflectance: &self.reflectance, emission: &self.emission, area: &self.area };
             solve::solve_observed(solver, &sys, opts, progress, observer)
-        }
+        };
+        result.map_err(|e| match e {
+            Error::Diverged { why, elements, .. } => {
+                let places = elements.iter().map(|&i| element_place(scene, mesh, i)).collect();
+                Error::Diverged { why, elements, places }
+            }
+            e => e,
+        })
     }
 
-    fn finish(self, solution: Solution, solve_seconds: f64) -> Solved {
+    fn finish(self, mut solution: Solution, solve_seconds: f64, progress: &dyn Progress) -> Solved {
         let mut timings = self.timings;
         timings.solve = solve_seconds;
+        // Split what escaped into openings and back faces, and warn when back faces take much.
+        let loss = crate::back_faces::split_escaped(
+            &self.scene,
+            &self.mesh,
+            &self.rays,
+            &self.receivers,
+            &solution.radiosity,
+            &self.area,
+            &mut solution.energy,
+        );
+        let mut warnings = Vec::new();
+        if let Some(w) = crate::back_faces::warning(&self.scene, &loss, &solution.energy) {
+            progress.message(&format!("warning: {w}"));
+            warnings.push(w);
+        }
         let t = Instant::now();
         let vertex_radiosity = reconstruct::vertex_radiosity(&self.scene, &self.mesh, &solution.display_radiosity());
         timings.reconstruct = t.elapsed().as_secs_f64();
@@ -242,6 +278,7 @@ impl Prepared {
             vertex_radiosity,
             timings,
             refinement: self.refinement,
+            warnings,
         }
     }
 }
@@ -291,7 +328,7 @@ pub fn solve_scene_observed(
                 }
             }
         }
-        return Ok(prepared.finish(solution, seconds));
+        return Ok(prepared.finish(solution, seconds, progress));
     }
 }
 
@@ -360,7 +397,7 @@ pub fn solve_all(scene: Scene, settings: &Settings, progress: &dyn Progress) -> 
         .map(|(solver, s)| (solver, s.clone()))
         .ok_or(Error::Cancelled)?;
     let (reference, solution) = reference;
-    Ok(Comparison { solved: prepared.finish(solution, seconds), reference, runs })
+    Ok(Comparison { solved: prepared.finish(solution, seconds, progress), reference, runs })
 }
 
 impl Comparison {
@@ -546,7 +583,7 @@ impl Solved {
             timings: self.timings.clone(),
             objects: self.objects(),
             images: Vec::new(),
-            warnings: self.scene.warnings.iter().map(|w| w.to_string()).collect(),
+            warnings: self.scene.warnings.iter().map(|w| w.to_string()).chain(self.warnings.iter().cloned()).collect(),
             refinement: self.refinement.clone(),
             ..Default::default()
         }

@@ -58,11 +58,13 @@ pub struct EnergyReport {
     pub emitted: [f64; 3],
     /// Absorbed by the surfaces.
     pub absorbed: [f64; 3],
-    /// Left through openings (open scenes) or onto the back of one-sided surfaces.
+    /// Left through openings (open scenes).
     pub escaped: [f64; 3],
+    /// Absorbed by the back faces of one-sided surfaces (a winding problem when large).
+    pub back_faces: [f64; 3],
     /// Received but not yet passed on (unshot power; for gathering solvers the residual).
     pub unshot: [f64; 3],
-    /// max over channels of |emitted − absorbed − escaped − unshot| / emitted.
+    /// max over channels of |emitted − absorbed − escaped − back_faces − unshot| / emitted.
     pub imbalance: f64,
 }
 
@@ -72,6 +74,7 @@ impl From<&EnergyBalance> for EnergyReport {
             emitted: e.emitted.to_array(),
             absorbed: e.absorbed.to_array(),
             escaped: e.escaped.to_array(),
+            back_faces: e.back_faces.to_array(),
             unshot: e.unshot.to_array(),
             imbalance: e.relative_imbalance(),
         }

@@ -5,8 +5,10 @@
 //! element may exceed it (Σⱼ Fᵢⱼ ≤ 1 bounds the Neumann series).
 
 use glam::DVec3;
+mod common;
+
 use radiosity::form_factor::Method;
-use radiosity::pipeline::{solve_scene, Settings};
+use radiosity::pipeline::{solve_all, solve_scene, Settings};
 use radiosity::scene::{MaterialDesc, ObjectDesc, PolygonDesc, Scene, SceneDesc};
 use radiosity::solve::Solver;
 use radiosity::{NoProgress, Rgb};
@@ -83,7 +85,15 @@ fn survey() {
             s.mesh_size = Some(0.1);
             s.solve.tolerance = 1e-9;
             s.solver = Solver::Jacobi;
-            let solved = solve_scene(scene.clone(), &s, &NoProgress).unwrap();
+            let solved = match solve_scene(scene.clone(), &s, &NoProgress) {
+                Ok(x) => x,
+                Err(e) => {
+                    println!("{name:18} {:14} ERROR {e}", m.name());
+                    continue;
+                }
+            };
+            let g = &solved.ff_stats.as_ref().unwrap().guard;
+            println!("{name:18} {:14} guard: corrected {} dropped {} raw max {:.4} at {:?}", m.name(), g.rows_corrected, g.entries_dropped, g.max_row_sum, g.worst_row);
             let f = solved.transport.as_ref().unwrap();
             let n = solved.mesh.len();
             let mut worst = (0.0, 0);
@@ -115,4 +125,168 @@ fn survey() {
             );
         }
     }
+}
+
+/// Distance from `x` to a convex planar polygon.
+fn distance_to_polygon(x: DVec3, v: &[DVec3], n: DVec3) -> f64 {
+    let d = n.dot(x - v[0]);
+    let y = x - n * d;
+    let inside = (0..v.len()).all(|k| (v[(k + 1) % v.len()] - v[k]).cross(y - v[k]).dot(n) >= 0.0);
+    if inside {
+        return d.abs();
+    }
+    (0..v.len())
+        .map(|k| {
+            let (a, b) = (v[k], v[(k + 1) % v.len()]);
+            let t = ((x - a).dot(b - a) / (b - a).length_squared()).clamp(0.0, 1.0);
+            (x - (a + (b - a) * t)).length()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Elements whose centroid is farther than `gap` from every polygon but its own (and its
+/// two-sided twin), and wholly open: surfaces "not in contact with another".
+fn free_elements(solved: &radiosity::pipeline::Solved, gap: f64) -> Vec<usize> {
+    let (scene, mesh) = (&solved.scene, &solved.mesh);
+    (0..mesh.len())
+        .filter(|&i| {
+            let e = &mesh.elements[i];
+            let own = &scene.polygons[e.patch as usize];
+            solved.receivers.open_fraction[i] >= 1.0
+                && scene.polygons.iter().enumerate().all(|(q, p)| {
+                    q == e.patch as usize
+                        || (p.two_sided && p.normal.dot(own.normal) < -0.999999 && (p.centroid() - own.centroid()).length() < 1e-9)
+                        || distance_to_polygon(e.centroid, &p.vertices, p.normal) > gap
+                })
+        })
+        .collect()
+}
+
+/// Every solver on one scene and method: no element above the bound 2π (E/(1 − ρ), the
+/// method's tolerance on top), the energy balance closed to 1e-6, and every element not in
+/// contact within 1 % of 2π (deterministic solvers; the stochastic ones by the mean of
+/// those elements, per object).
+pub fn check_furnace(name: &str, scene: Scene, method: Method, mesh_size: f64) {
+    let mut s = Settings::default();
+    s.form_factors.method = method;
+    s.mesh_size = Some(mesh_size);
+    s.solve.tolerance = 1e-9;
+    s.solve.max_iterations = 200;
+    let t = std::time::Instant::now();
+    let cmp = solve_all(scene, &s, &NoProgress).unwrap_or_else(|e| panic!("{name} {}: {e}", method.name()));
+    let exact = 2.0 * std::f64::consts::PI;
+    let free = free_elements(&cmp.solved, 0.75 * mesh_size);
+    assert!(free.len() * 4 > cmp.solved.mesh.len(), "{name}: only {} of {} elements free", free.len(), cmp.solved.mesh.len());
+    let g = &cmp.solved.ff_stats.as_ref().unwrap().guard;
+    eprintln!(
+        "{name} {}: {} elements ({} free), rows corrected {} (raw max {:.4}), {:.1} s",
+        method.name(),
+        cmp.solved.mesh.len(),
+        free.len(),
+        g.rows_corrected,
+        g.max_row_sum,
+        t.elapsed().as_secs_f64()
+    );
+    for run in &cmp.runs {
+        let sol = run.outcome.as_ref().unwrap_or_else(|e| panic!("{name} {} {}: {e}", method.name(), run.solver));
+        let b = &sol.radiosity;
+        let tol = if run.solver.is_stochastic() { 0.05 } else { 1e-6 };
+        let max = b.iter().map(|x| x.max_element()).fold(0.0, f64::max);
+        assert!(max <= exact * (1.0 + tol), "{name} {} {}: max B {max} above the bound {exact}", method.name(), run.solver);
+        let imb = sol.energy.relative_imbalance();
+        assert!(imb <= 1e-6, "{name} {} {}: energy imbalance {imb:.3e}", method.name(), run.solver);
+        if run.solver.is_stochastic() {
+            let (mut num, mut den) = (0.0, 0.0);
+            for &i in &free {
+                num += cmp.solved.mesh.elements[i].area * b[i].max_element();
+                den += cmp.solved.mesh.elements[i].area;
+            }
+            let mean = num / den;
+            assert!((mean / exact - 1.0).abs() <= 0.01, "{name} {} {}: free mean {:.5} of 2π", method.name(), run.solver, mean / exact);
+        } else {
+            let worst = free.iter().map(|&i| ((b[i] - Rgb::splat(exact)).abs() / exact).max_element()).fold(0.0, f64::max);
+            assert!(worst <= 0.01, "{name} {} {}: a free element is {:.3} % off 2π", method.name(), run.solver, 100.0 * worst);
+        }
+    }
+}
+
+macro_rules! furnace_tests {
+    ($($test:ident: $case:expr, $method:expr;)*) => {$(
+        #[test]
+        fn $test() {
+            let (name, scene) = cases().into_iter().find(|c| c.0 == $case).unwrap();
+            check_furnace(name, scene, $method, 0.125);
+        }
+    )*};
+}
+
+furnace_tests! {
+    furnace_duplicate_boxes_point_sampled: "duplicate", Method::PointSampled;
+    furnace_duplicate_boxes_monte_carlo: "duplicate", Method::MonteCarlo;
+    furnace_duplicate_boxes_hemicube: "duplicate", Method::Hemicube;
+    furnace_duplicate_boxes_adaptive: "duplicate", Method::Adaptive;
+    furnace_touching_boxes_point_sampled: "touching", Method::PointSampled;
+    furnace_touching_boxes_monte_carlo: "touching", Method::MonteCarlo;
+    furnace_touching_boxes_hemicube: "touching", Method::Hemicube;
+    furnace_touching_boxes_adaptive: "touching", Method::Adaptive;
+    furnace_interpenetrating_boxes_point_sampled: "interpenetrating", Method::PointSampled;
+    furnace_interpenetrating_boxes_monte_carlo: "interpenetrating", Method::MonteCarlo;
+    furnace_interpenetrating_boxes_hemicube: "interpenetrating", Method::Hemicube;
+    furnace_interpenetrating_boxes_adaptive: "interpenetrating", Method::Adaptive;
+    furnace_thin_slab_point_sampled: "thin-slab", Method::PointSampled;
+    furnace_thin_slab_monte_carlo: "thin-slab", Method::MonteCarlo;
+    furnace_thin_slab_hemicube: "thin-slab", Method::Hemicube;
+    furnace_thin_slab_adaptive: "thin-slab", Method::Adaptive;
+    furnace_t_junctions_point_sampled: "t-junction", Method::PointSampled;
+    furnace_t_junctions_monte_carlo: "t-junction", Method::MonteCarlo;
+    furnace_t_junctions_hemicube: "t-junction", Method::Hemicube;
+    furnace_t_junctions_adaptive: "t-junction", Method::Adaptive;
+}
+
+/// A real model's geometry inside a closed two-sided furnace room: every material grey
+/// ρ = 0.5 with Ke = 1, the room 10 % larger than the model's bounds.
+fn model_in_furnace(rel: &str) -> Option<Scene> {
+    let path = common::shared(rel)?;
+    let mut d = radiosity::scene::load(path.to_str().unwrap()).unwrap();
+    for m in &mut d.materials {
+        m.reflectance = Rgb::splat(0.5);
+        m.emission = Rgb::ONE;
+    }
+    d.two_sided = true;
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for p in &d.polygons {
+        for x in &p.vertices {
+            lo = lo.min(*x);
+            hi = hi.max(*x);
+        }
+    }
+    let pad = (hi - lo) * 0.05;
+    let obj = d.objects.len() as u32;
+    d.objects.push(ObjectDesc { name: "furnace-room".into(), loc: None });
+    for f in box_faces(lo - pad, hi + pad, true) {
+        d.polygons.push(PolygonDesc { vertices: f, material: 0, object: obj, loc: None });
+    }
+    d.camera = None;
+    Some(Scene::from_desc(d).unwrap())
+}
+
+macro_rules! model_furnace_tests {
+    ($($test:ident: $rel:expr, $method:expr, $frac:expr;)*) => {$(
+        #[test]
+        fn $test() {
+            let Some(scene) = model_in_furnace($rel) else { return };
+            let size = scene.diagonal() / $frac;
+            check_furnace($rel, scene, $method, size);
+        }
+    )*};
+}
+
+model_furnace_tests! {
+    furnace_office2_point_sampled: "scenes/renderpark-office2/office2.obj", Method::PointSampled, 24.0;
+    furnace_office2_monte_carlo: "scenes/renderpark-office2/office2.obj", Method::MonteCarlo, 24.0;
+    furnace_office2_hemicube: "scenes/renderpark-office2/office2.obj", Method::Hemicube, 24.0;
+    furnace_office2_adaptive: "scenes/renderpark-office2/office2.obj", Method::Adaptive, 24.0;
+    furnace_classroom_point_sampled: "scenes/renderpark-classroom/classroom.obj", Method::PointSampled, 24.0;
+    furnace_classroom_monte_carlo: "scenes/renderpark-classroom/classroom.obj", Method::MonteCarlo, 24.0;
+    furnace_classroom_hemicube: "scenes/renderpark-classroom/classroom.obj", Method::Hemicube, 24.0;
 }

@@ -63,6 +63,10 @@ pub(crate) struct Scratch {
     heap: BinaryHeap<Region>,
     shaft: Vec<(DVec3, f64)>,
     rshaft: Vec<(DVec3, f64)>,
+    /// Whether the pair's first / second element is partly covered (see [`Rows::row`]).
+    cover: (bool, bool),
+    /// Whether the polygon being integrated over is partly covered.
+    cover_sender: bool,
 }
 
 #[derive(Default)]
@@ -120,15 +124,23 @@ impl RowSource for Rows<'_> {
         }
         let (ci, ni) = ctx.corners(i);
         let ci = &ci[..ni];
+        // The solvers want the factor of the open part (coverage): pieces of a partly
+        // covered element that lie inside a solid are left out of the integration over it,
+        // and the row is divided by the open area.
+        let open = |e: usize| ctx.receivers.open_fraction.get(e).copied().unwrap_or(1.0);
+        let partly = |f: f64| f > 0.0 && f < 1.0;
+        let oi = open(i);
+        let area_i = if partly(oi) { ei.area * oi } else { ei.area };
         let patches = std::mem::take(&mut s.patches);
         for &q in &patches {
             let pe = mesh.patches[q as usize];
             for j in pe.first..pe.first + pe.count {
                 let ej = &mesh.elements[j as usize];
                 let (cj, nj) = ctx.corners(j as usize);
+                s.cover = (partly(oi), partly(open(j as usize)));
                 let af = self.pair(ci, ei.normal, ei.patch, &cj[..nj], ej.normal, q, s);
                 if af != 0.0 {
-                    out.push((j, af / ei.area));
+                    out.push((j, af / area_i));
                 }
             }
         }
@@ -188,6 +200,7 @@ impl Rows<'_> {
             CmpOrdering::Equal if patch_i != patch_j => patch_j < patch_i,
             CmpOrdering::Equal => (pj[0].x, pj[0].y, pj[0].z) < (pi[0].x, pi[0].y, pi[0].z),
         };
+        s.cover_sender = if swap { s.cover.1 } else { s.cover.0 };
         if swap {
             self.pair_directed(pj, nj, patch_j, pi, ni, patch_i, s)
         } else {
@@ -232,7 +245,7 @@ impl Rows<'_> {
             }
             occ.push(k);
         });
-        if s.occ.is_empty() && !ctx.opts.adaptive_always_integrate {
+        if s.occ.is_empty() && !ctx.opts.adaptive_always_integrate && !s.cover_sender {
             return analytic::area_factor_with(&mut s.an, pi, ni, pj, nj);
         }
         // Only the part of each polygon in front of the other can exchange energy; cutting
@@ -259,6 +272,12 @@ impl Rows<'_> {
         let pieces = self.sender_pieces(&si, ni, s);
         let mut total = 0.0;
         for piece in &pieces {
+            if s.cover_sender {
+                let c = piece.iter().copied().sum::<DVec3>() / piece.len() as f64;
+                if crate::mesh::coverage::covered(c, ni, patch_i, ctx.scene, ctx.rays, ctx.scene.diagonal()) {
+                    continue;
+                }
+            }
             total += self.integrate(piece, ni, &recv, min_level, s);
         }
         total

@@ -368,3 +368,75 @@ mod tests {
         assert_eq!(d, 0.0);
     }
 }
+
+/// For every polygon, the lower-numbered polygons that lie in the same plane, face the
+/// same way and overlap it with positive area ("coincident twins": a rug on a floor, the
+/// back copy of a two-sided box's bottom on the floor it stands on). From any point, both
+/// members of such a pair are visible where they overlap, so methods that test
+/// visibility per polygon would count the overlap twice; the lower number owns it.
+/// Candidates are grouped by plane (normal and offset quantised to `eps`), then tested by
+/// separating axes in the plane.
+pub fn coincident_twins(polys: &[crate::scene::Polygon], eps: f64) -> Vec<Vec<u32>> {
+    use std::collections::HashMap;
+    let mut out = vec![Vec::new(); polys.len()];
+    let q = |x: f64, s: f64| (x / s).round() as i64;
+    let mut groups: HashMap<[i64; 4], Vec<u32>> = HashMap::new();
+    for (k, p) in polys.iter().enumerate() {
+        let n = p.normal;
+        let d = n.dot(p.vertices[0]);
+        groups.entry([q(n.x, 1e-6), q(n.y, 1e-6), q(n.z, 1e-6), q(d, eps.max(f64::MIN_POSITIVE) * 10.0)]).or_default().push(k as u32);
+    }
+    for members in groups.values().filter(|m| m.len() > 1) {
+        let n = polys[members[0] as usize].normal;
+        let frame = PlaneFrame::new(polys[members[0] as usize].vertices[0], n);
+        let flat: Vec<Vec<DVec2>> = members.iter().map(|&k| polys[k as usize].vertices.iter().map(|v| frame.to_2d(*v)).collect()).collect();
+        let boxes: Vec<(DVec2, DVec2)> = flat.iter().map(|p| bounds_2d(p)).collect();
+        for a in 0..members.len() {
+            for b in 0..a {
+                let (la, ha) = boxes[a];
+                let (lb, hb) = boxes[b];
+                if la.x >= hb.x - eps || lb.x >= ha.x - eps || la.y >= hb.y - eps || lb.y >= ha.y - eps {
+                    continue;
+                }
+                if convex_overlap_2d(&flat[a], &flat[b], eps) {
+                    let (hi, lo) = if members[a] > members[b] { (members[a], members[b]) } else { (members[b], members[a]) };
+                    out[hi as usize].push(lo);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// True when two convex polygons overlap by more than `eps` across every separating axis
+/// candidate (their edge normals).
+fn convex_overlap_2d(a: &[DVec2], b: &[DVec2], eps: f64) -> bool {
+    for poly in [a, b] {
+        for k in 0..poly.len() {
+            let e = poly[(k + 1) % poly.len()] - poly[k];
+            let axis = DVec2::new(-e.y, e.x);
+            let len = axis.length();
+            if len <= 0.0 {
+                continue;
+            }
+            let axis = axis / len;
+            let span = |p: &[DVec2]| p.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(axis.dot(*v)), hi.max(axis.dot(*v))));
+            let (a0, a1) = span(a);
+            let (b0, b1) = span(b);
+            if a1 <= b0 + eps || b1 <= a0 + eps {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// True when `x` (on the plane of the convex polygon `v` with normal `n`) lies strictly
+/// inside it, more than `eps` from every edge.
+pub fn inside_convex(x: DVec3, v: &[DVec3], n: DVec3, eps: f64) -> bool {
+    (0..v.len()).all(|k| {
+        let e = v[(k + 1) % v.len()] - v[k];
+        let l = e.length();
+        l > 0.0 && e.cross(x - v[k]).dot(n) > eps * l
+    })
+}

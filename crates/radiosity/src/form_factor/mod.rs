@@ -188,6 +188,81 @@ pub struct Stats {
     /// Things the user should know about the result (e.g. occlusion ignored).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// What the row guard had to correct (see [`RowGuard`]).
+    pub guard: RowGuard,
+}
+
+/// The guard behind every method: each row leaves the method with every `F_ij` finite
+/// and positive and `Σ_j F_ij ≤ 1`, so `B = E + ρFB` is a contraction (`‖ρF‖∞ < 1`) and no
+/// radiosity can exceed the furnace bound `max E / (1 − max ρ)` on any geometry. A raw row
+/// that breaks this (sampling near coincident or touching surfaces, rounding) is repaired —
+/// non-finite and negative entries dropped, a sum above 1 scaled to 1 — and counted here.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct RowGuard {
+    /// Rows whose sum exceeded 1 + [`ROW_SUM_SLACK`] and were scaled to 1.
+    pub rows_corrected: u64,
+    /// Entries dropped because they were NaN, infinite or negative.
+    pub entries_dropped: u64,
+    /// The largest raw row sum met (before correction).
+    pub max_row_sum: f64,
+    /// The row (element or polygon) with that sum.
+    pub worst_row: Option<usize>,
+    /// Where that row's source polygon was defined, filled in by the caller that knows
+    /// the geometry (e.g. `cube.obj:12`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worst_source: Option<String>,
+}
+
+/// Rows may exceed 1 by this much (rounding) before they count as corrected.
+pub const ROW_SUM_SLACK: f64 = 1e-9;
+
+impl RowGuard {
+    /// Repairs row `i` in place (see the type's docs).
+    pub fn check(&mut self, i: usize, row: &mut Vec<(u32, f64)>) {
+        let before = row.len();
+        row.retain(|e| e.1.is_finite() && e.1 >= 0.0);
+        self.entries_dropped += (before - row.len()) as u64;
+        let sum: f64 = row.iter().map(|e| e.1).sum();
+        if sum > self.max_row_sum || self.worst_row.is_none() {
+            self.max_row_sum = sum;
+            self.worst_row = Some(i);
+        }
+        if sum > 1.0 {
+            if sum > 1.0 + ROW_SUM_SLACK {
+                self.rows_corrected += 1;
+            }
+            for e in row.iter_mut() {
+                e.1 /= sum;
+            }
+        }
+    }
+
+    /// Adds another guard's counts.
+    pub fn merge(&mut self, o: &RowGuard) {
+        self.rows_corrected += o.rows_corrected;
+        self.entries_dropped += o.entries_dropped;
+        if o.max_row_sum > self.max_row_sum || self.worst_row.is_none() {
+            self.max_row_sum = o.max_row_sum;
+            self.worst_row = o.worst_row;
+            self.worst_source = o.worst_source.clone();
+        }
+    }
+
+    /// A warning for the user when something was corrected.
+    pub fn warning(&self) -> Option<String> {
+        if self.rows_corrected == 0 && self.entries_dropped == 0 {
+            return None;
+        }
+        let at = self.worst_source.as_deref().map(|s| format!(" (polygon at {s})")).unwrap_or_default();
+        Some(format!(
+            "form factors: {} row(s) summed above 1 and were scaled to 1, {} non-finite or negative entries dropped; \
+             largest raw row sum {:.4} at row {}{at}; this happens near coincident, touching or interpenetrating surfaces",
+            self.rows_corrected,
+            self.entries_dropped,
+            self.max_row_sum,
+            self.worst_row.unwrap_or(0)
+        ))
+    }
 }
 
 /// Computes the form-factor rows of all elements of `mesh`, for the radiosity solvers
@@ -208,15 +283,19 @@ pub fn compute(
 ) -> Result<(SparseRows, Stats)> {
     check_row_memory(scene, mesh, opts)?;
     let mut rows: Vec<Vec<(u32, f32)>> = Vec::with_capacity(mesh.len());
-    let whole_element = matches!(opts.method, Method::MonteCarlo | Method::Adaptive);
-    let stats = for_each_row(scene, mesh, rays, receivers, opts, None, progress, &mut |i, row| {
-        let open = receivers.open_fraction.get(i).copied().unwrap_or(1.0);
-        let scale = if whole_element && open > 0.0 { 1.0 / open } else { 1.0 };
-        rows.push(row.iter().filter(|e| e.1 > 0.0).map(|&(j, f)| (j, (f * scale) as f32)).collect());
+    let stats = for_each_row(scene, mesh, rays, receivers, opts, None, progress, &mut |_, row| {
+        rows.push(row.iter().filter(|e| e.1 > 0.0).map(|&(j, f)| (j, f as f32)).collect());
         Ok(())
     })?;
     let rows = SparseRows::from_rows(rows);
-    let stats = Stats { nonzeros: rows.nnz() as u64, ..stats };
+    let mut stats = Stats { nonzeros: rows.nnz() as u64, ..stats };
+    if let Some(i) = stats.guard.worst_row {
+        stats.guard.worst_source = mesh.elements.get(i).and_then(|e| scene.polygons[e.patch as usize].loc.as_ref()).map(|l| l.to_string());
+    }
+    if let Some(w) = stats.guard.warning() {
+        progress.message(&format!("warning: {w}"));
+        stats.warnings.push(w);
+    }
     Ok((rows, stats))
 }
 
@@ -247,7 +326,7 @@ pub fn for_each_row(
         }
     };
     let ctx = Context::new(scene, mesh, rays, receivers, opts);
-    let (nonzeros, nrays) = match opts.method {
+    let (nonzeros, nrays, guard) = match opts.method {
         Method::Hemicube => drive(&hemicube::Rows::new(&ctx), which, progress, sink)?,
         Method::Analytic => {
             warn_occlusion(scene, progress, &mut warnings);
@@ -263,6 +342,7 @@ pub fn for_each_row(
         rays: nrays,
         seconds: t0.elapsed().as_secs_f64(),
         warnings,
+        guard,
     })
 }
 
@@ -294,13 +374,16 @@ pub fn for_each_polygon_row(
     let receivers = Receivers::default();
     let ctx = Context::new(scene, &mesh, rays, &receivers, opts);
     let mut warnings = Vec::new();
-    let (nonzeros, nrays) = if opts.method == Method::Analytic {
+    let (nonzeros, nrays, mut guard) = if opts.method == Method::Analytic {
         warn_occlusion(scene, progress, &mut warnings);
         drive(&analytic_rows::PolygonRows::new(&ctx), which, progress, sink)?
     } else {
         drive(&adaptive::PolygonRows::new(&ctx), which, progress, sink)?
     };
-    Ok(Stats { method: opts.method.name().to_string(), nonzeros, rays: nrays, seconds: t0.elapsed().as_secs_f64(), warnings })
+    if let Some(p) = guard.worst_row {
+        guard.worst_source = scene.polygons.get(p).and_then(|p| p.loc.as_ref()).map(|l| l.to_string());
+    }
+    Ok(Stats { method: opts.method.name().to_string(), nonzeros, rays: nrays, seconds: t0.elapsed().as_secs_f64(), warnings, guard })
 }
 
 fn warn_occlusion(scene: &Scene, progress: &dyn Progress, warnings: &mut Vec<String>) {
@@ -378,8 +461,9 @@ fn drive<R: RowSource>(
     which: &[u32],
     progress: &dyn Progress,
     sink: &mut dyn FnMut(usize, &[(u32, f64)]) -> Result<()>,
-) -> Result<(u64, u64)> {
+) -> Result<(u64, u64, RowGuard)> {
     progress.begin("form factors", which.len() as u64);
+    let mut guard = RowGuard::default();
     let rays = AtomicU64::new(0);
     let stopped = AtomicBool::new(false);
     let mut nonzeros = 0u64;
@@ -410,13 +494,14 @@ fn drive<R: RowSource>(
             progress.end();
             return Err(Error::Cancelled);
         }
-        for (&i, r) in block.iter().zip(&rows) {
+        for (&i, mut r) in block.iter().zip(rows) {
+            guard.check(i as usize, &mut r);
             nonzeros += r.len() as u64;
-            sink(i as usize, r)?;
+            sink(i as usize, &r)?;
         }
     }
     progress.end();
-    Ok((nonzeros, rays.load(Ordering::Relaxed)))
+    Ok((nonzeros, rays.load(Ordering::Relaxed), guard))
 }
 
 /// Why some polygon could hide part of another from a third, or None for a convex scene

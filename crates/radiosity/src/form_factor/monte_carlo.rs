@@ -17,7 +17,17 @@
 //!
 //! Rays ignore the sender's own polygon (planar: it cannot be hit) and the back faces of
 //! two-sided polygons (their front twin, coincident, is hit instead); a ray that meets the
-//! back of a one-sided polygon is absorbed there and counts for nobody. Each row draws from
+//! back of a one-sided polygon is absorbed there and counts for nobody.
+//!
+//! **Covered parts.** The solvers want the factor of an element's *open* part (see
+//! [`crate::mesh::coverage`]: floor under a box is covered). On an element that is partly
+//! covered, a ray whose first hit is the inside of a solid (the back of a one-sided
+//! polygon, or the generated back copy of a two-sided one — the coverage test's own rule)
+//! started under the solid: it is dropped from the numerator *and* the denominator, so the
+//! row is the ray estimate over the open part and still sums to at most 1. (Dividing the
+//! whole element's row by its open fraction instead counted the covered part's view of the
+//! inside of a two-sided box as if the open part had it: row sums up to 32 and a diverging
+//! solve on touching boxes, issue 9.) Each row draws from
 //! its own random stream (seed, row), so results do not depend on the thread count.
 
 use glam::{DVec3, Vec3};
@@ -93,6 +103,9 @@ impl RowSource for Rows<'_> {
         let inv = 1.0 / m as f64;
         let mut wsum = 0.0;
         let patch = ei.patch;
+        let open = self.ctx.receivers.open_fraction.get(i).copied().unwrap_or(1.0);
+        let partly_covered = open > 0.0 && open < 1.0;
+        let polygons = &self.ctx.scene.polygons;
         for k in 0..total {
             let (pu, pv) = ((k % m) as f64, (k / m) as f64);
             let (u, v) = ((pu + rng.random::<f64>()) * inv, (pv + rng.random::<f64>()) * inv);
@@ -107,7 +120,6 @@ impl RowSource for Rows<'_> {
             } else {
                 1.0
             };
-            wsum += w;
             let l = cosine_hemisphere(u1, u2);
             let dir: DVec3 = t * l.x + b * l.y + n * l.z;
             let dirf = dir.as_vec3();
@@ -116,6 +128,15 @@ impl RowSource for Rows<'_> {
                 let e = self.owner[prim as usize] as usize;
                 mesh.elements[e].patch == patch || (self.two_sided[e] && self.normal[e].dot(dirf) >= 0.0)
             });
+            if partly_covered {
+                if let Some(h) = &hit {
+                    let p = &polygons[mesh.elements[self.owner[h.prim as usize] as usize].patch as usize];
+                    if p.back_side || p.normal.dot(dir) > 0.0 {
+                        continue; // started inside a solid: not part of the open area
+                    }
+                }
+            }
+            wsum += w;
             if let Some(h) = hit {
                 let j = self.owner[h.prim as usize];
                 if self.normal[j as usize].dot(dirf) < 0.0 {
@@ -126,6 +147,7 @@ impl RowSource for Rows<'_> {
                 }
             }
         }
+        let wsum = wsum.max(f64::MIN_POSITIVE);
         for &j in &s.touched {
             out.push((j, s.acc[j as usize] / wsum));
             s.acc[j as usize] = 0.0;

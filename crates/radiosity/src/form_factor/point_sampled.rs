@@ -12,7 +12,11 @@
 //! `F(dA → A_j)` is the exact contour integral ([`super::kernel`]); `V̂` is the fraction of
 //! `visibility_samples²` rays from `x_s` to stratified points of `j` that reach it. Rows of
 //! a closed, unoccluded enclosure sum to one exactly (up to rounding), which is what the
-//! furnace test needs. Each row draws from its own random stream (seed, row), so results
+//! furnace test needs. Where two coplanar polygons facing the same way overlap (a rug on a
+//! floor; the back copy of a two-sided box's bottom on the floor under it), both would pass
+//! the visibility test and the overlap would count twice (row sums up to 1.39 on a box in a
+//! two-sided furnace, issue 9): a sample on the overlap counts only for the lower-numbered
+//! polygon. Each row draws from its own random stream (seed, row), so results
 //! do not depend on the thread count.
 
 use glam::DVec3;
@@ -28,11 +32,15 @@ const BIG_PATCH: u32 = 8;
 
 pub(crate) struct Rows<'a> {
     ctx: &'a Context<'a>,
+    /// Per polygon: the lower-numbered coplanar, same-facing polygons that overlap it; a
+    /// visibility sample on the overlap belongs to them (see [`super::geom::coincident_twins`]).
+    twins: Vec<Vec<u32>>,
 }
 
 impl<'a> Rows<'a> {
     pub fn new(ctx: &'a Context<'a>) -> Self {
-        Rows { ctx }
+        let eps = 1e-7 * ctx.scene.diagonal();
+        Rows { ctx, twins: super::geom::coincident_twins(&ctx.scene.polygons, eps) }
     }
 }
 
@@ -77,7 +85,13 @@ impl RowSource for Rows<'_> {
                     continue;
                 }
                 tried += 1;
-                if rays.visible(x, pi, y, q) {
+                let owned_by_twin = || {
+                    self.twins[q as usize].iter().any(|&t| {
+                        let p = &scene.polygons[t as usize];
+                        super::geom::inside_convex(y, &p.vertices, p.normal, eps)
+                    })
+                };
+                if rays.visible(x, pi, y, q) && !owned_by_twin() {
                     seen += 1;
                 }
             }

@@ -163,7 +163,7 @@ fn grid(e: &super::Element, positions: &[DVec3], k: usize) -> Vec<DVec3> {
 }
 
 /// True when every probe ray from `p` hits a back face first.
-fn covered(p: DVec3, n: DVec3, patch: u32, scene: &Scene, rays: &SceneRays, diag: f64) -> bool {
+pub(crate) fn covered(p: DVec3, n: DVec3, patch: u32, scene: &Scene, rays: &SceneRays, diag: f64) -> bool {
     let (t, b) = basis(n);
     let origin = (p + n * (1e-7 * diag)).as_vec3();
     for s in 0..PROBES {

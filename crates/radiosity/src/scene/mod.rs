@@ -143,6 +143,8 @@ pub struct Polygon {
     /// True when the polygon is one side of a two-sided pair (a coincident polygon with the
     /// opposite normal exists): renderers and probes then ignore its back face.
     pub two_sided: bool,
+    /// Where the input polygon it came from was defined (OBJ `f` line), for messages.
+    pub loc: Option<Location>,
 }
 
 impl Polygon {

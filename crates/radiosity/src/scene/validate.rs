@@ -124,9 +124,10 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
                     object: p.object,
                     back_side: true,
                     two_sided: true,
+                    loc: p.loc.clone(),
                 });
             }
-            out.push(Polygon { vertices: v, normal, area, material: p.material, object: p.object, back_side: false, two_sided: two });
+            out.push(Polygon { vertices: v, normal, area, material: p.material, object: p.object, back_side: false, two_sided: two, loc: p.loc.clone() });
         }
     }
     // Keep front sides before back sides of the same input polygon? Order does not matter
@@ -143,6 +144,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             msg: format!("{split_nonplanar} non-planar polygon(s) split into triangles (v0, vi, vi+1)"),
         });
     }
+    drop_duplicates(&mut out, diag, &mut warnings);
     if out.is_empty() {
         return Err(Error::Invalid(format!("{name}: the scene has no usable polygons")));
     }
@@ -173,6 +175,59 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     obstructions.sort_unstable();
     obstructions.dedup();
     Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions })
+}
+
+/// Removes polygons that repeat an earlier one exactly (the same vertices in the same
+/// cyclic order, so the same side faces the same way), with one warning naming the first
+/// few. Two coincident copies facing the same way are one surface written twice (an
+/// exporter's duplicate, a box pasted onto itself): each would see the full scene, so the
+/// receiver's row would count the same surface twice and sum above 1 (issue 9: "absorbed
+/// 106 %"). A copy facing the other way is kept: that is how files write two-sided walls.
+fn drop_duplicates(polys: &mut Vec<Polygon>, diag: f64, warnings: &mut Vec<Warning>) {
+    // Vertices quantised to 1e-9 of the scene size, rotated to start at the smallest.
+    let q = 1e-9 * diag.max(f64::MIN_POSITIVE);
+    let key = |p: &Polygon| -> Vec<[i64; 3]> {
+        let v: Vec<[i64; 3]> =
+            p.vertices.iter().map(|x| [(x.x / q).round() as i64, (x.y / q).round() as i64, (x.z / q).round() as i64]).collect();
+        let start = (0..v.len()).min_by_key(|&k| v[k]).unwrap_or(0);
+        let mut r = v[start..].to_vec();
+        r.extend_from_slice(&v[..start]);
+        r
+    };
+    let mut seen: HashMap<Vec<[i64; 3]>, usize> = HashMap::with_capacity(polys.len());
+    let mut keep = vec![true; polys.len()];
+    let mut dropped = Vec::new();
+    for (k, p) in polys.iter().enumerate() {
+        match seen.entry(key(p)) {
+            std::collections::hash_map::Entry::Occupied(first) => {
+                keep[k] = false;
+                if !p.back_side {
+                    dropped.push((k, *first.get()));
+                }
+            }
+            std::collections::hash_map::Entry::Vacant(e) => {
+                e.insert(k);
+            }
+        }
+    }
+    if dropped.is_empty() {
+        return;
+    }
+    let at = |k: usize| polys[k].loc.as_ref().map_or_else(|| format!("polygon {k}"), |l| l.to_string());
+    let examples: Vec<String> = dropped.iter().take(3).map(|&(k, f)| format!("{} repeats {}", at(k), at(f))).collect();
+    warnings.push(Warning {
+        loc: polys[dropped[0].0].loc.clone(),
+        msg: format!(
+            "skipped {} polygon(s) that duplicate an earlier one exactly (same vertices, same side): {}",
+            dropped.len(),
+            examples.join("; ")
+        ),
+    });
+    let mut k = 0;
+    polys.retain(|_| {
+        k += 1;
+        keep[k - 1]
+    });
 }
 
 enum Cleaned {

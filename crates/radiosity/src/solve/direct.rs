@@ -83,6 +83,7 @@ pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
     }
     drop(a);
     let residual = sys.residual(&b);
+    mon.watch(residual, Some(&b))?;
     mon.record(1, 1.0, residual);
     mon.observe(1, residual, || Cow::Borrowed(&b));
     let energy = energy_gathering(sys, &b, None);

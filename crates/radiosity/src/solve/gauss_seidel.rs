@@ -27,6 +27,7 @@ pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
     let mut residual = sys.residual(&b);
     let mut sweep = 0;
     let stop = loop {
+        mon.watch(residual, Some(&b))?;
         if sweep > 0 {
             mon.record(sweep, sweep as f64, residual);
             mon.observe(sweep, residual, || Cow::Borrowed(&b));

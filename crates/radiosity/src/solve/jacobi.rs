@@ -20,6 +20,7 @@ pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
         sys.transport.gather(&b, &mut fb);
         // The residual of the current iterate B⁽ⁱᵗ⁾, from the same product.
         let residual = sys.residual_with(&b, &fb);
+        mon.watch(residual, Some(&b))?;
         if it > 0 {
             mon.record(it, it as f64, residual);
             mon.observe(it, residual, || Cow::Borrowed(&b));

@@ -27,6 +27,14 @@
 //! **Energy.** Every [`Solution`] carries its [`EnergyBalance`]: emitted = absorbed +
 //! escaped + unshot, computed in the formulation the solver uses (see [`EnergyBalance`]).
 //!
+//! **Guards.** A solver cannot return a wrong answer quietly: its inputs must be finite
+//! (E ≥ 0, 0 ≤ ρ < 1, areas ≥ 0), and after every iteration the [`Monitor`] stops with
+//! [`Error::Diverged`] when the residual is not finite, when it has risen for
+//! [`RISING_LIMIT`] records in a row to more than twice its lowest value, or (deterministic
+//! solvers) when some radiosity exceeds the physical bound `max E / (1 − max ρ)` — which
+//! holds for every solution of a system whose rows sum to at most 1, as the form-factor
+//! row guard ensures.
+//!
 //! **Observing.** [`solve_observed`] calls an observer after every iteration (every bounce;
 //! for progressive refinement after 1, 2, 4 … shots and then every `n` shots) with the
 //! current display radiosity, so that a program can draw light flowing into the scene.
@@ -251,7 +259,7 @@ pub struct IterationState<'a> {
 pub type Observer<'a> = dyn FnMut(&IterationState<'_>) + 'a;
 
 /// Energy bookkeeping of a solution, power per RGB channel (W or scene units):
-/// `emitted = absorbed + escaped + unshot`.
+/// `emitted = absorbed + escaped + back_faces + unshot`.
 ///
 /// With `S` the radiosity already passed on ("shot") and `ΔB = B − S` the part still to pass
 /// on, the power arriving at the elements is `H = F·S` (gathering solvers, rows of F) or
@@ -267,8 +275,11 @@ pub struct EnergyBalance {
     pub emitted: Rgb,
     /// Absorbed by the surfaces.
     pub absorbed: Rgb,
-    /// Left the scene (openings, back faces of one-sided surfaces).
+    /// Left the scene through openings (or, until [`crate::back_faces::split_escaped`]
+    /// has run, also onto the back of one-sided surfaces).
     pub escaped: Rgb,
+    /// Absorbed by the back faces of one-sided surfaces (see [`crate::back_faces`]).
+    pub back_faces: Rgb,
     /// Received but not yet passed on (the unconverged part).
     pub unshot: Rgb,
 }
@@ -276,7 +287,7 @@ pub struct EnergyBalance {
 impl EnergyBalance {
     /// `emitted − absorbed − escaped − unshot`: zero up to rounding when the books close.
     pub fn imbalance(&self) -> Rgb {
-        self.emitted - self.absorbed - self.escaped - self.unshot
+        self.emitted - self.absorbed - self.escaped - self.back_faces - self.unshot
     }
     /// The largest channel of |imbalance| relative to the emitted power of that channel.
     pub fn relative_imbalance(&self) -> f64 {
@@ -356,7 +367,9 @@ pub fn solve_observed(
     if system.transport.len() != n || system.reflectance.len() != n || system.area.len() != n {
         return Err(Error::Invalid("solve: system sizes disagree".into()));
     }
+    check_inputs(system)?;
     let mut mon = Monitor::new(solver, opts, progress, observer);
+    mon.bound = radiosity_bound(system.emission, system.reflectance);
     match solver {
         Solver::Direct => direct::solve(system, &mut mon),
         Solver::Jacobi => jacobi::solve(system, &mut mon),
@@ -367,6 +380,51 @@ pub fn solve_observed(
             "the {solver} solver casts rays and needs the geometry: use solve::stochastic::solve"
         ))),
     }
+}
+
+/// Records in a row with a rising residual after which a solve counts as diverging (when
+/// the residual is also above twice its lowest value).
+pub const RISING_LIMIT: usize = 5;
+
+/// Checks that the system's inputs are finite and physical.
+fn check_inputs(sys: &System) -> Result<()> {
+    let bad = |what: &str, i: usize, v: String| {
+        Err(Error::Diverged { why: format!("solver input: {what} of element {i} is {v}"), elements: vec![i], places: Vec::new() })
+    };
+    for i in 0..sys.len() {
+        let (e, r, a) = (sys.emission[i], sys.reflectance[i], sys.area[i]);
+        if !e.is_finite() || e.min_element() < 0.0 {
+            return bad("emission", i, format!("{e}"));
+        }
+        if !r.is_finite() || r.min_element() < 0.0 || r.max_element() >= 1.0 {
+            return bad("reflectance", i, format!("{r}"));
+        }
+        if !a.is_finite() || a < 0.0 {
+            return bad("area", i, format!("{a}"));
+        }
+    }
+    Ok(())
+}
+
+/// The physical bound on radiosity, `max E / (1 − max ρ)` (largest channel), for a system
+/// whose rows sum to at most 1; infinite when nothing reflects less than 1.
+pub fn radiosity_bound(emission: &[Rgb], reflectance: &[Rgb]) -> f64 {
+    let e = emission.iter().fold(0.0f64, |m, e| m.max(e.max_element()));
+    let r = reflectance.iter().fold(0.0f64, |m, r| m.max(r.max_element()));
+    if r < 1.0 {
+        e / (1.0 - r)
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// The elements with the largest radiosity, worst first (at most `k`).
+fn worst_elements(b: &[Rgb], k: usize) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..b.len()).collect();
+    let key = |i: usize| if b[i].is_finite() { b[i].max_element() } else { f64::INFINITY };
+    idx.sort_by(|&x, &y| key(y).total_cmp(&key(x)));
+    idx.truncate(k);
+    idx
 }
 
 /// The bookkeeping every solver shares: the clock (minus observer time), the history,
@@ -381,6 +439,12 @@ pub(crate) struct Monitor<'a, 'o> {
     history: Vec<IterationRecord>,
     /// Rays cast so far.
     pub(crate) rays: u64,
+    /// Lowest residual so far, the last one, and records in a row that rose.
+    lowest: f64,
+    last: f64,
+    rising: usize,
+    /// The physical bound on radiosity (infinite: not checked).
+    pub(crate) bound: f64,
 }
 
 impl<'a, 'o> Monitor<'a, 'o> {
@@ -399,7 +463,60 @@ impl<'a, 'o> Monitor<'a, 'o> {
             excluded: Duration::ZERO,
             history: Vec::new(),
             rays: 0,
+            lowest: f64::INFINITY,
+            last: f64::INFINITY,
+            rising: 0,
+            bound: f64::INFINITY,
         }
+    }
+
+    /// The divergence guard, after an iteration with `residual` (see the module docs):
+    /// `radiosity` is checked against [`Monitor::bound`] and for non-finite values.
+    pub(crate) fn watch(&mut self, residual: f64, radiosity: Option<&[Rgb]>) -> Result<()> {
+        let diverged = |why: String, b: Option<&[Rgb]>| Error::Diverged {
+            why: format!("the {} solve diverged: {why}", self.solver),
+            elements: b.map(|b| worst_elements(b, 3)).unwrap_or_default(),
+            places: Vec::new(),
+        };
+        if !residual.is_finite() {
+            return Err(diverged(format!("the residual is {residual}"), radiosity));
+        }
+        if residual > self.last * (1.0 + 1e-12) {
+            self.rising += 1;
+        } else {
+            self.rising = 0;
+        }
+        self.last = residual;
+        self.lowest = self.lowest.min(residual);
+        // Stochastic residuals are estimates with noise: only a tenfold rise counts.
+        let factor = if self.solver.is_stochastic() { 10.0 } else { 2.0 };
+        if self.rising >= RISING_LIMIT && residual > factor * self.lowest {
+            return Err(diverged(
+                format!(
+                    "the residual rose for {} iterations in a row, from {:.3e} to {residual:.3e}",
+                    self.rising, self.lowest
+                ),
+                radiosity,
+            ));
+        }
+        if let Some(b) = radiosity {
+            if let Some(i) = b.iter().position(|x| !x.is_finite()) {
+                return Err(diverged(format!("element {i} has radiosity {}", b[i]), radiosity));
+            }
+            if self.bound.is_finite() {
+                let (i, m) = b.iter().enumerate().fold((0, 0.0), |acc, (i, x)| if x.max_element() > acc.1 { (i, x.max_element()) } else { acc });
+                if m > self.bound * (1.0 + 1e-6) + 1e-300 {
+                    return Err(diverged(
+                        format!(
+                            "element {i} has radiosity {m:.6e}, above the physical bound max E/(1 − max ρ) = {:.6e}",
+                            self.bound
+                        ),
+                        radiosity,
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 
     fn elapsed(&self) -> Duration {
@@ -514,31 +631,6 @@ pub(crate) fn energy_gathering(sys: &System, b: &[Rgb], unshot: Option<&[Rgb]>) 
         };
     }
     out.escaped = leaving - arriving;
-    out
-}
-
-/// Energy balance in the power formulation (senders' rows): element `j` sends `A_j S_j`
-/// with `S = B − ΔB`, of which `F_ji` arrives at `i`.
-pub(crate) fn energy_power(sys: &System, rows: &SparseRows, b: &[Rgb], unshot: &[Rgb]) -> EnergyBalance {
-    let n = b.len();
-    let mut arriving = vec![Rgb::ZERO; n];
-    let mut out = EnergyBalance { emitted: sys.emitted_power(), ..Default::default() };
-    for j in 0..n {
-        let phi = (b[j] - unshot[j]) * sys.area[j];
-        let (c, v) = rows.row(j);
-        let mut sent = 0.0;
-        for (&i, &f) in c.iter().zip(v) {
-            arriving[i as usize] += phi * f as f64;
-            sent += f as f64;
-        }
-        out.escaped += phi * (1.0 - sent);
-        out.unshot += unshot[j] * sys.area[j];
-    }
-    for i in 0..n {
-        // Elements with no open area (inside closed geometry) keep what reaches them.
-        let kept = if sys.area[i] > 0.0 { Rgb::ONE - sys.reflectance[i] } else { Rgb::ONE };
-        out.absorbed += kept * arriving[i];
-    }
     out
 }
 

@@ -55,6 +55,7 @@ pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
         residual = total / emitted;
         let pow2 = shots.is_power_of_two() && shots < n;
         if shots > 0 && (pow2 || shots % record_every == 0) {
+            mon.watch(residual, Some(&b))?;
             mon.record(shots, shots as f64 / n as f64, residual);
         }
         if shots > 0 && (pow2 || shots % n == 0) && mon.observing() {

@@ -32,6 +32,7 @@ pub(super) fn solve(sys: &RaySystem, mon: &mut Monitor) -> Result<Solution> {
     let mut residual = mean_unshot(&reps);
     let mut it = 0;
     let stop = 'iterations: loop {
+        mon.watch(residual, None)?;
         if it > 0 {
             mon.record(it, it as f64, residual);
             observe(mon, it, residual, &reps);
