@@ -321,7 +321,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         write_atomic(p, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     if !a.solve.quiet {
-        eprintln!("wrote {} in {:.2} s", report.images.join(", "), report.timings.total);
+        let images = if report.images.is_empty() { "no image".to_string() } else { report.images.join(", ") };
+        eprintln!("wrote {images} in {:.2} s", report.timings.total);
     }
     Ok(exit_code(stats.stop))
 }
