@@ -194,7 +194,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             }
             cam.validate().map_err(|m| anyhow::anyhow!("camera: {m}"))?;
             if framed {
-                cam = default_camera_inside(&scene, cam, a.width, a.height, a.solve.quiet);
+                cam = default_camera_inside(&scene, cam, a.width, a.height, a.fov, a.solve.quiet);
             }
             vec![("main".to_string(), cam, out_png.clone(), a.exr.clone())]
         }
@@ -386,7 +386,7 @@ fn check_image_memory(a: &RenderArgs, spp: usize, gather: bool) -> Result<()> {
 /// The framing default for a scene without a camera looks at it from outside; for a closed
 /// room (every ray from there meets the backs of its one-sided walls) a camera inside the
 /// bounding box, on the same line of sight, is used when it sees more.
-fn default_camera_inside(scene: &Scene, outside: Camera, width: usize, height: usize, quiet: bool) -> Camera {
+fn default_camera_inside(scene: &Scene, outside: Camera, width: usize, height: usize, fov: Option<f64>, quiet: bool) -> Camera {
     let rays = radiosity::accel::SceneRays::new(&scene.polygons);
     let before = view_coverage(scene, &rays, &outside, width, height, 64);
     if before.problem().is_none() || before.back * 100 < before.total() {
@@ -401,7 +401,8 @@ fn default_camera_inside(scene: &Scene, outside: Camera, width: usize, height: u
     if !t.is_finite() {
         return outside;
     }
-    let inside = Camera { position: centre - dir * (0.8 * t), look_at: centre + dir * t, up: outside.up, vfov_deg: 60.0 };
+    let vfov_deg = fov.unwrap_or(60.0);
+    let inside = Camera { position: centre - dir * (0.8 * t), look_at: centre + dir * t, up: outside.up, vfov_deg };
     if inside.validate().is_err() {
         return outside;
     }
