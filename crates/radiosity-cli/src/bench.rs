@@ -80,7 +80,8 @@ pub fn run(a: BenchArgs) -> Result<ExitCode> {
 }
 
 fn rays(a: RaysArgs) -> Result<ExitCode> {
-    anyhow::ensure!(a.rays > 0 && a.runs > 0 && a.threads > 0, "--rays, --runs and --threads must be positive");
+    anyhow::ensure!(a.rays > 0 && a.runs > 0, "--rays and --runs must be positive");
+    crate::common::check_threads(Some(a.threads))?;
     let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads).build()?;
     let scenes: Vec<String> =
         if a.scenes.is_empty() { DEFAULT_SCENES.iter().map(|s| s.to_string()).collect() } else { a.scenes.clone() };

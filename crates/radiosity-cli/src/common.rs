@@ -1,5 +1,7 @@
 //! Flags shared by the subcommands and their validation into library settings.
 
+use std::fs::File;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -39,10 +41,12 @@ pub struct SolveFlags {
     /// Stop when the relative power residual is at most this.
     #[arg(long, value_name = "TOL", default_value_t = 1e-4)]
     pub tolerance: f64,
-    /// Stop after this many iterations.
+    /// Stop after this many iterations: sweeps over every element for jacobi, gauss-seidel and
+    /// shooting, ray iterations for the stochastic solvers, and sweeps of n shots (n = the
+    /// element count) for progressive, whose report counts single shots.
     #[arg(long, value_name = "N", default_value_t = 1000)]
     pub max_iterations: usize,
-    /// Stop solving after this many seconds.
+    /// Stop solving after this many seconds (at most 1e9, about 31 years).
     #[arg(long, value_name = "SECONDS")]
     pub time_budget: Option<f64>,
     /// Stochastic solvers: rays per iteration for the full emitted power [default: 500 per
@@ -57,7 +61,7 @@ pub struct SolveFlags {
     /// Seed for every random choice (results do not depend on --threads).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Worker threads [default: all cores].
+    /// Worker threads, 1 to 1024 [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
     /// Write the JSON report here.
@@ -82,11 +86,8 @@ impl SolveFlags {
         if self.visibility_samples == 0 || self.visibility_samples > 16 {
             bail!("--visibility-samples must be between 1 and 16");
         }
-        let time_budget = match self.time_budget {
-            Some(t) if t.is_finite() && t > 0.0 => Some(Duration::from_secs_f64(t)),
-            Some(t) => bail!("--time-budget must be a positive number of seconds, got {t}"),
-            None => None,
-        };
+        let time_budget = self.time_budget.map(time_budget).transpose()?;
+        check_threads(self.threads)?;
         let method: form_factor::Method = self.form_factors.parse()?;
         // `all` is a mode of `solve`, not a solver: the settings then carry a placeholder.
         let solver: Solver = if self.all_solvers() {
@@ -121,13 +122,7 @@ impl SolveFlags {
 
     /// Configures the global thread pool.
     pub fn init_threads(&self) -> Result<()> {
-        if let Some(n) = self.threads {
-            if n == 0 {
-                bail!("--threads must be at least 1");
-            }
-            rayon::ThreadPoolBuilder::new().num_threads(n).build_global().context("setting up threads")?;
-        }
-        Ok(())
+        init_threads(self.threads)
     }
 
     /// Loads and validates the scene, printing its warnings.
@@ -141,6 +136,44 @@ impl SolveFlags {
         }
         Ok((scene, t.elapsed().as_secs_f64()))
     }
+}
+
+/// The largest `--time-budget`, in seconds (about 31 years): far beyond any run, far below
+/// what a `Duration` holds.
+pub const MAX_TIME_BUDGET_S: f64 = 1e9;
+
+/// The most worker threads `--threads` accepts.
+pub const MAX_THREADS: usize = 1024;
+
+/// A validated `--time-budget`: positive, finite, at most [`MAX_TIME_BUDGET_S`].
+pub fn time_budget(t: f64) -> Result<Duration> {
+    if !(t.is_finite() && t > 0.0) {
+        bail!("--time-budget must be a positive number of seconds, got {t}");
+    }
+    if t > MAX_TIME_BUDGET_S {
+        bail!("--time-budget must be at most {MAX_TIME_BUDGET_S:e} seconds (about 31 years), got {t:e}");
+    }
+    Ok(Duration::from_secs_f64(t))
+}
+
+/// Validates `--threads` (1 to [`MAX_THREADS`]) before any work starts.
+pub fn check_threads(threads: Option<usize>) -> Result<()> {
+    match threads {
+        Some(n) if n == 0 || n > MAX_THREADS => bail!("--threads must be between 1 and {MAX_THREADS}, got {n}"),
+        _ => Ok(()),
+    }
+}
+
+/// Validates `--threads` and configures the global thread pool.
+pub fn init_threads(threads: Option<usize>) -> Result<()> {
+    check_threads(threads)?;
+    if let Some(n) = threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .with_context(|| format!("--threads {n}: cannot start the worker threads"))?;
+    }
+    Ok(())
 }
 
 /// Accuracy settings of the form-factor methods (shared by render, solve, viewfactors).
@@ -232,16 +265,164 @@ impl AdaptiveFlags {
     }
 }
 
-/// Writes `bytes` to `path` atomically (temporary file in the same folder, then rename),
-/// creating the folder if needed.
+/// Writes `bytes` to `path` atomically (temporary file in the same folder, flushed to disk,
+/// then renamed over the target), creating the folder if needed. See [`write_atomic_with`].
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic_with(path, |mut w| {
+        w.write_all(bytes)?;
+        w.flush()?;
+        Ok(())
+    })
+}
+
+/// Writes `path` atomically through `f`, which gets a buffered temporary file beside the
+/// target and must flush it. The temporary file is synced to disk (so that a full disk is
+/// an error here, not a truncated file later) and renamed over the target; on every failure
+/// (write, sync, rename) it is removed. A target that exists and is not a regular file (a
+/// directory, a device such as /dev/null, a FIFO, a socket) is refused, never replaced.
+pub fn write_atomic_with(path: &Path, f: impl FnOnce(BufWriter<File>) -> Result<()>) -> Result<()> {
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let name = path.file_name().with_context(|| format!("{}: not a file name", path.display()))?;
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create folder {}", dir.display()))?;
+    // Checked again here: the target may have appeared since the check before the work.
+    if let Some(why) = not_replaceable(path) {
+        bail!("cannot write {}: {why}", path.display());
+    }
     let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
-    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
+    let result = (|| -> Result<()> {
+        let file = File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+        let handle = file.try_clone().with_context(|| format!("cannot write {}", tmp.display()))?;
+        f(BufWriter::with_capacity(1 << 20, file)).with_context(|| format!("cannot write {}", path.display()))?;
+        handle.sync_all().with_context(|| format!("cannot write {}", path.display()))?;
+        std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Why an existing `path` must not be replaced by a rename (None: absent or a regular file).
+fn not_replaceable(path: &Path) -> Option<String> {
+    let meta = std::fs::metadata(path).ok()?;
+    let ft = meta.file_type();
+    if ft.is_file() {
+        return None;
+    }
+    if ft.is_dir() {
+        return Some("it is a directory".into());
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let kind = if ft.is_char_device() {
+            "a character device"
+        } else if ft.is_block_device() {
+            "a block device"
+        } else if ft.is_fifo() {
+            "a FIFO (named pipe)"
+        } else if ft.is_socket() {
+            "a socket"
+        } else {
+            "not a regular file"
+        };
+        return Some(format!("it is {kind}, not a regular file; refusing to replace it (write to a regular file)"));
+    }
+    #[allow(unreachable_code)]
+    Some("it is not a regular file; refusing to replace it (write to a regular file)".into())
+}
+
+/// The output files of a run, checked together before any work starts.
+#[derive(Default)]
+pub struct Outputs {
+    files: Vec<(String, PathBuf)>,
+}
+
+impl Outputs {
+    /// Adds the file `path` named by `flag` (e.g. "-o", "--report").
+    pub fn add(&mut self, flag: &str, path: &Path) {
+        self.files.push((flag.to_string(), path.to_path_buf()));
+    }
+
+    /// Checks every output: a file name, distinct from the others, not an existing
+    /// directory or special file, and in a folder that exists (or can be created) and is
+    /// writable. Nothing is created but a probe file, removed at once.
+    pub fn check(&self) -> Result<()> {
+        let mut seen: Vec<(PathBuf, &str, &Path)> = Vec::new();
+        for (flag, path) in &self.files {
+            check_output(flag, path)?;
+            let key = normalized(path);
+            if let Some((_, other, p)) = seen.iter().find(|(k, _, _)| *k == key) {
+                if other == flag {
+                    bail!("{flag}: two outputs are the same file {} (and {}): outputs must be distinct", path.display(), p.display());
+                }
+                bail!("{other} {} and {flag} {} are the same file: outputs must be distinct", p.display(), path.display());
+            }
+            seen.push((key, flag, path));
+        }
+        Ok(())
+    }
+}
+
+/// The pre-check of one output (see [`Outputs::check`]).
+fn check_output(flag: &str, path: &Path) -> Result<()> {
+    if path.file_name().is_none() {
+        bail!("{flag} {}: not a file name", path.display());
+    }
+    if let Some(why) = not_replaceable(path) {
+        bail!("{flag} {}: {why}", path.display());
+    }
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    // The nearest folder that exists: the file's own, or the one its folders will be made in.
+    let mut existing = dir;
+    while !existing.exists() {
+        match existing.parent() {
+            Some(p) if !p.as_os_str().is_empty() => existing = p,
+            _ => {
+                existing = Path::new(".");
+                break;
+            }
+        }
+    }
+    if !existing.is_dir() {
+        bail!("{flag} {}: {} is not a folder", path.display(), existing.display());
+    }
+    let probe = existing.join(format!(".radiosity-probe-{}", std::process::id()));
+    match File::options().write(true).create_new(true).open(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => bail!("{flag} {}: cannot write in folder {}: {e}", path.display(), existing.display()),
+    }
     Ok(())
+}
+
+/// `path` made absolute with its existing folders resolved (symbolic links, `..`), so that
+/// two spellings of one file compare equal.
+fn normalized(path: &Path) -> PathBuf {
+    if let Ok(p) = std::fs::canonicalize(path) {
+        return p;
+    }
+    let name = path.file_name().map(PathBuf::from).unwrap_or_default();
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    match std::fs::canonicalize(dir) {
+        Ok(d) => d.join(name),
+        Err(_) => {
+            let abs = std::env::current_dir().map(|c| c.join(path)).unwrap_or_else(|_| path.to_path_buf());
+            let mut out = PathBuf::new();
+            for c in abs.components() {
+                match c {
+                    std::path::Component::CurDir => {}
+                    std::path::Component::ParentDir => {
+                        out.pop();
+                    }
+                    c => out.push(c),
+                }
+            }
+            out
+        }
+    }
 }
 
 /// One line per term of the energy balance, for the summary on stderr.
@@ -267,5 +448,116 @@ pub fn exit_code(reason: StopReason) -> ExitCode {
         ExitCode::from(130)
     } else {
         ExitCode::SUCCESS
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("radiosity-common-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn leftovers(d: &Path) -> Vec<String> {
+        std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".tmp"))
+            .collect()
+    }
+
+    #[test]
+    fn atomic_write_removes_its_temporary_file_when_the_rename_fails() {
+        let d = dir("rename");
+        // The target is an existing directory: refused before any temporary file.
+        let target = d.join("out.png");
+        std::fs::create_dir_all(target.join("inside")).unwrap();
+        let err = write_atomic(&target, b"data").unwrap_err().to_string();
+        assert!(err.contains("out.png") && err.contains("directory"), "{err}");
+        assert!(leftovers(&d).is_empty(), "left behind: {:?}", leftovers(&d));
+        // The target becomes a non-empty directory while the file is written (after every
+        // check): the rename fails, and the temporary file is removed.
+        let late = d.join("late.png");
+        let err = write_atomic_with(&late, |mut w| {
+            w.write_all(b"data")?;
+            w.flush()?;
+            std::fs::create_dir_all(late.join("inside"))?;
+            Ok(())
+        })
+        .unwrap_err();
+        assert!(format!("{err:#}").contains("late.png"), "{err:#}");
+        assert!(late.join("inside").is_dir());
+        assert!(leftovers(&d).is_empty(), "left behind: {:?}", leftovers(&d));
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn atomic_write_removes_its_temporary_file_when_writing_fails() {
+        let d = dir("write");
+        let target = d.join("r.json");
+        let err = write_atomic_with(&target, |_| bail!("No space left on device (os error 28)")).unwrap_err();
+        assert!(format!("{err:#}").contains("No space left"), "{err:#}");
+        assert!(!target.exists());
+        assert!(leftovers(&d).is_empty(), "left behind: {:?}", leftovers(&d));
+        // And a good write leaves only the file.
+        write_atomic(&target, b"{}").unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"{}");
+        assert!(leftovers(&d).is_empty());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn atomic_write_to_a_full_device_fails() {
+        // /dev/full: every write fails with ENOSPC. The pre-check refuses it as a device; the
+        // write path (if reached, e.g. a target that became one) fails and keeps it intact.
+        let err = write_atomic(Path::new("/dev/full"), b"x").unwrap_err().to_string();
+        assert!(err.contains("/dev/full") && err.contains("character device"), "{err}");
+        use std::os::unix::fs::FileTypeExt;
+        assert!(std::fs::metadata("/dev/full").unwrap().file_type().is_char_device());
+        let mut o = Outputs::default();
+        o.add("-o", Path::new("/dev/full"));
+        let err = o.check().unwrap_err().to_string();
+        assert!(err.contains("-o /dev/full") && err.contains("not a regular file"), "{err}");
+    }
+
+    #[test]
+    fn outputs_must_be_distinct_writable_regular_files() {
+        let d = dir("outputs");
+        let mut o = Outputs::default();
+        o.add("-o", &d.join("x.png"));
+        o.add("--exr", &d.join("sub/../x.png"));
+        std::fs::create_dir_all(d.join("sub")).unwrap();
+        let err = o.check().unwrap_err().to_string();
+        assert!(err.contains("-o") && err.contains("--exr") && err.contains("distinct"), "{err}");
+        let mut o = Outputs::default();
+        o.add("--report", &d);
+        let err = o.check().unwrap_err().to_string();
+        assert!(err.contains("--report") && err.contains("is a directory"), "{err}");
+        std::fs::write(d.join("file"), b"").unwrap();
+        let mut o = Outputs::default();
+        o.add("-o", &d.join("file/x.png"));
+        let err = o.check().unwrap_err().to_string();
+        assert!(err.contains("is not a folder"), "{err}");
+        // Folders that do not exist yet are fine (they are created), and nothing is left.
+        let mut o = Outputs::default();
+        o.add("-o", &d.join("new/deeper/x.png"));
+        o.check().unwrap();
+        assert!(!d.join("new").exists());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn time_budget_and_threads_are_bounded() {
+        assert!(time_budget(1e300).unwrap_err().to_string().contains("at most 1e9"));
+        assert!(time_budget(f64::INFINITY).is_err() && time_budget(0.0).is_err() && time_budget(-1.0).is_err());
+        assert_eq!(time_budget(2.5).unwrap(), Duration::from_millis(2500));
+        assert!(check_threads(Some(5000)).unwrap_err().to_string().contains("between 1 and 1024"));
+        assert!(check_threads(Some(0)).is_err());
+        assert!(check_threads(Some(1024)).is_ok() && check_threads(None).is_ok());
     }
 }

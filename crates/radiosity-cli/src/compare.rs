@@ -29,6 +29,11 @@ pub struct CompareArgs {
 }
 
 pub fn run(a: CompareArgs) -> Result<ExitCode> {
+    if let Some(p) = &a.heatmap {
+        let mut o = crate::common::Outputs::default();
+        o.add("--heatmap", p);
+        o.check()?;
+    }
     let img = output::exr::read(&a.image)?;
     let reference = output::exr::read(&a.reference)?;
     let all = metrics::relative_rmse(&img, &reference, None)?;

@@ -14,13 +14,13 @@ use radiosity::output;
 use radiosity::pipeline::{render_radiosity, solve_scene, solve_scene_observed};
 use radiosity::render::gather;
 use radiosity::render::gouraud::{self, ElementTracer, Shading};
-use radiosity::render::Image;
+use radiosity::render::{view_coverage, Image};
 use radiosity::report::ViewReport;
 use radiosity::scene::{Camera, Scene};
-use radiosity::solve::IterationState;
-use radiosity::NoProgress;
+use radiosity::solve::{IterationState, StopReason};
+use radiosity::{NoProgress, Progress as _};
 
-use crate::common::{energy_summary, exit_code, write_atomic, SolveFlags};
+use crate::common::{energy_summary, exit_code, write_atomic, Outputs, SolveFlags};
 use crate::progress::CliProgress;
 
 /// Flags of `radiosity render`.
@@ -53,11 +53,11 @@ pub struct RenderArgs {
     /// Vertical field of view in degrees.
     #[arg(long, value_name = "DEGREES")]
     pub fov: Option<f64>,
-    /// Image width in pixels.
-    #[arg(long, default_value_t = 512)]
+    /// Image width in pixels (1 to 65535; the image must also fit in the memory available).
+    #[arg(long, default_value_t = 512, value_parser = parse_side)]
     pub width: usize,
-    /// Image height in pixels.
-    #[arg(long, default_value_t = 512)]
+    /// Image height in pixels (1 to 65535).
+    #[arg(long, default_value_t = 512, value_parser = parse_side)]
     pub height: usize,
     /// Samples per pixel along each axis (box filter) [default: 6 for gather, 3 for
     /// gouraud and flat].
@@ -91,6 +91,18 @@ struct Frame {
     pixels: Vec<[f32; 3]>,
 }
 
+/// The largest image side accepted at parsing (PNG and EXR themselves allow more; memory
+/// is checked separately).
+const MAX_SIDE: usize = 65535;
+
+fn parse_side(s: &str) -> Result<usize, String> {
+    let n: usize = s.trim().parse().map_err(|_| format!("'{s}' is not a whole number of pixels"))?;
+    if n == 0 || n > MAX_SIDE {
+        return Err(format!("must be between 1 and {MAX_SIDE} pixels, got {n}"));
+    }
+    Ok(n)
+}
+
 fn parse_vec3(s: &str) -> Result<DVec3, String> {
     let v: Vec<f64> = s
         .split(',')
@@ -105,12 +117,8 @@ fn parse_vec3(s: &str) -> Result<DVec3, String> {
 pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let t0 = Instant::now();
     let settings = a.solve.settings()?;
-    a.solve.init_threads()?;
     if a.solve.all_solvers() {
         bail!("--solver all compares solvers: use it with `radiosity solve` (and --plot); render one solver");
-    }
-    if a.width == 0 || a.height == 0 || a.width > 16384 || a.height > 16384 {
-        bail!("--width and --height must be between 1 and 16384");
     }
     let spp = a.spp.unwrap_or(if a.mode == "gather" { 6 } else { 3 });
     if spp == 0 || spp > 64 {
@@ -130,19 +138,44 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             bail!("--exposure must be a positive number");
         }
     }
+    check_image_memory(&a, spp, gather)?;
     let file_camera = match &a.camera {
         Some(p) => Some(Camera::load_json(p)?),
         None => None,
     };
     let view_list = match &a.views {
-        Some(p) => Some(Camera::load_views(p)?),
+        Some(p) => {
+            let list = Camera::load_views(p)?;
+            for (k, (name, _)) in list.iter().enumerate() {
+                if let Some(j) = list[..k].iter().position(|(n, _)| n == name) {
+                    bail!(
+                        "{}: views {j} and {k} are both named '{name}': view names must be distinct (each names its output files)",
+                        p.display()
+                    );
+                }
+            }
+            Some(list)
+        }
         None => None,
     };
+    let names: Vec<String> = match &view_list {
+        Some(list) => list.iter().map(|(n, _)| n.clone()).collect(),
+        None => vec!["main".to_string()],
+    };
+    // Outputs are checked before any work: now when -o names the image, else (default name
+    // from the scene) right after loading it.
+    if let Some(png) = &a.output {
+        outputs(&a, png, view_list.is_some(), &names).check()?;
+    }
+    a.solve.init_threads()?;
     let (scene, load_s) = a.solve.load_scene()?;
     let out_png = a.output.clone().unwrap_or_else(|| PathBuf::from(format!("{}.png", scene.name)));
+    outputs(&a, &out_png, view_list.is_some(), &names).check()?;
+    let mut warnings = Vec::new();
     // The views: one (file, flags, the scene's own camera, or a framing default) or a list.
     let views: Vec<(String, Camera, PathBuf, Option<PathBuf>)> = match view_list {
         None => {
+            let framed = file_camera.is_none() && scene.camera.is_none() && a.eye.is_none() && a.look_at.is_none();
             let mut cam = file_camera.or(scene.camera).unwrap_or_else(|| {
                 let (lo, hi) = scene.bounds();
                 Camera::framing(lo, hi)
@@ -160,6 +193,9 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                 cam.vfov_deg = f;
             }
             cam.validate().map_err(|m| anyhow::anyhow!("camera: {m}"))?;
+            if framed {
+                cam = default_camera_inside(&scene, cam, a.width, a.height, a.fov, a.solve.quiet);
+            }
             vec![("main".to_string(), cam, out_png.clone(), a.exr.clone())]
         }
         Some(list) => list
@@ -171,6 +207,19 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             })
             .collect(),
     };
+    // A camera that sees nothing, or only the backs of one-sided surfaces, draws a black
+    // image: said now, before the solve.
+    {
+        let rays = radiosity::accel::SceneRays::new(&scene.polygons);
+        for (name, cam, _, _) in &views {
+            if let Some(why) = view_coverage(&scene, &rays, cam, a.width, a.height, 64).problem() {
+                let p = cam.position;
+                let w = format!("view '{name}': the camera at ({}, {}, {}) {why}", p.x, p.y, p.z);
+                eprintln!("warning: {w}");
+                warnings.push(w);
+            }
+        }
+    }
 
     let progress = CliProgress::new(a.solve.quiet);
     let preview = gouraud::Options { width: a.width, height: a.height, spp_axis: spp.min(3), shading };
@@ -213,10 +262,15 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let indirect = if gather { Some(solved.indirect_irradiance().1) } else { None };
     let mut report = solved.report();
     report.timings.load = load_s;
-    // Images are drawn even after an interrupt: the solution so far is what we have.
+    report.warnings.extend(warnings);
+    // After an interrupt during the solve the images are still drawn from the solution so
+    // far (a second Ctrl-C aborts); a first Ctrl-C after the solve (while rendering) stops
+    // rendering: the view being drawn and those after it are not written, the views done
+    // and the report are.
     let quiet = CliProgress::new(a.solve.quiet);
+    let render_progress = RenderStop { inner: &quiet, armed: stats.stop != StopReason::Interrupted };
     let mut first_exposure = None;
-    for (name, cam, png_path, exr_path) in &views {
+    for (k, (name, cam, png_path, exr_path)) in views.iter().enumerate() {
         let tv = Instant::now();
         let (img, rays) = match &indirect {
             Some(hv) => {
@@ -227,15 +281,24 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                     shadow_axis: a.shadow_rays,
                     seed: a.solve.seed,
                 };
-                solved.render_gather(cam, &gopts, &tracer, hv, &NeverStop(&quiet))
+                solved.render_gather(cam, &gopts, &tracer, hv, &render_progress)
             }
             None => {
                 let opts = gouraud::Options { width: a.width, height: a.height, spp_axis: spp, shading };
-                let img = solved.render(cam, &opts, &tracer, &NeverStop(&quiet));
+                let img = solved.render(cam, &opts, &tracer, &render_progress);
                 let rays = (a.width * a.height * spp * spp) as u64;
                 (img, rays)
             }
         };
+        if render_progress.should_stop() {
+            let w = format!(
+                "interrupted while rendering view '{name}': it and the {} view(s) after it were not written",
+                views.len() - k - 1
+            );
+            eprintln!("{w}");
+            report.warnings.push(w);
+            break;
+        }
         let mut files = vec![png_path.display().to_string()];
         let exposure = a.exposure.unwrap_or_else(|| output::auto_exposure(&img));
         first_exposure.get_or_insert(exposure);
@@ -258,9 +321,104 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         write_atomic(p, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     if !a.solve.quiet {
-        eprintln!("wrote {} in {:.2} s", report.images.join(", "), report.timings.total);
+        let images = if report.images.is_empty() { "no image".to_string() } else { report.images.join(", ") };
+        eprintln!("wrote {images} in {:.2} s", report.timings.total);
     }
     Ok(exit_code(stats.stop))
+}
+
+/// Every file the run will write, for the check before any work.
+fn outputs(a: &RenderArgs, png: &Path, list: bool, names: &[String]) -> Outputs {
+    let mut o = Outputs::default();
+    for name in names {
+        let (p, e) = if list {
+            (suffixed(png, name), a.exr.as_ref().map(|e| suffixed(e, name)))
+        } else {
+            (png.to_path_buf(), a.exr.clone())
+        };
+        o.add(if a.output.is_some() { "-o" } else { "the image (default name)" }, &p);
+        if let Some(e) = e {
+            o.add("--exr", &e);
+        }
+    }
+    if let Some(r) = &a.solve.report {
+        o.add("--report", r);
+    }
+    if let Some(d) = &a.frames {
+        o.add("--frames", &d.join("frames.json"));
+    }
+    o
+}
+
+/// Refuses an image whose buffers (for one view at a time: the radiance image, the
+/// renderer's own buffers, tone mapping and the encoders; with --frames one frame more)
+/// need more memory than is available now.
+fn check_image_memory(a: &RenderArgs, spp: usize, gather: bool) -> Result<()> {
+    let (w, h) = (a.width, a.height);
+    let pixels = (w as u64).saturating_mul(h as u64);
+    // Tone mapping (luminances, 8 B), 8-bit RGB and its compressed PNG (≤ 6 B), the EXR's f32
+    // channels and file (24 B), per pixel.
+    let encoders = pixels.saturating_mul(8 + 6 + if a.exr.is_some() { 24 } else { 0 });
+    let mut needed = radiosity::render::image_memory_bytes(w, h, spp, gather).saturating_add(encoders);
+    if a.frames.is_some() {
+        // The frame being drawn plus one kept (f32 RGB); more frames add 12 B per pixel each.
+        needed = needed
+            .saturating_add(radiosity::render::image_memory_bytes(w, h, spp.min(3), false))
+            .saturating_add(pixels.saturating_mul(12));
+    }
+    if let Some(available) = radiosity::transport::available_memory() {
+        if needed > available {
+            return Err(radiosity::Error::TooLarge {
+                what: format!(
+                    "rendering a {w}×{h} image ({}, {spp}×{spp} samples per pixel; one view at a time)",
+                    if gather { "gather" } else { a.mode.as_str() }
+                ),
+                needed,
+                limit: available,
+                hint: "the limit is the memory available now; use a smaller --width/--height or --spp".into(),
+            }
+            .into());
+        }
+    }
+    Ok(())
+}
+
+/// The framing default for a scene without a camera looks at it from outside; for a closed
+/// room (every ray from there meets the backs of its one-sided walls) a camera inside the
+/// bounding box, on the same line of sight, is used when it sees more.
+fn default_camera_inside(scene: &Scene, outside: Camera, width: usize, height: usize, fov: Option<f64>, quiet: bool) -> Camera {
+    let rays = radiosity::accel::SceneRays::new(&scene.polygons);
+    let before = view_coverage(scene, &rays, &outside, width, height, 64);
+    if before.problem().is_none() || before.back * 100 < before.total() {
+        return outside;
+    }
+    let (lo, hi) = scene.bounds();
+    let centre = 0.5 * (lo + hi);
+    let half = 0.5 * (hi - lo);
+    let dir = (outside.look_at - outside.position).normalize();
+    // Distance from the centre to the box along the line of sight, backwards.
+    let t = (0..3).filter(|&i| dir[i].abs() > 1e-12).map(|i| half[i] / dir[i].abs()).fold(f64::INFINITY, f64::min);
+    if !t.is_finite() {
+        return outside;
+    }
+    let vfov_deg = fov.unwrap_or(60.0);
+    let inside = Camera { position: centre - dir * (0.8 * t), look_at: centre + dir * t, up: outside.up, vfov_deg };
+    if inside.validate().is_err() {
+        return outside;
+    }
+    let after = view_coverage(scene, &rays, &inside, width, height, 64);
+    if after.front <= before.front {
+        return outside;
+    }
+    if !quiet {
+        let (o, p) = (outside.position, inside.position);
+        eprintln!(
+            "note: the default camera, outside the scene at ({:.4}, {:.4}, {:.4}), sees only the backs of its one-sided \
+             surfaces (a closed room); using a camera inside at ({:.4}, {:.4}, {:.4}) (--eye/--look-at or --camera choose another)",
+            o.x, o.y, o.z, p.x, p.y, p.z
+        );
+    }
+    inside
 }
 
 /// `dir/stem.ext` → `dir/stem_name.ext`.
@@ -294,19 +452,26 @@ fn write_frames(dir: &Path, frames: &[Frame], width: usize, height: usize, expos
     Ok(files)
 }
 
-/// Forwards progress but never asks to stop (used for output after an interrupt).
-struct NeverStop<'a>(&'a CliProgress);
-impl radiosity::Progress for NeverStop<'_> {
+/// Rendering's progress: forwards to the bars and stops on a Ctrl-C pressed after the solve
+/// (`armed`), not on one that stopped the solve (its images are still drawn).
+struct RenderStop<'a> {
+    inner: &'a CliProgress,
+    armed: bool,
+}
+impl radiosity::Progress for RenderStop<'_> {
     fn begin(&self, s: &str, t: u64) {
-        self.0.begin(s, t)
+        self.inner.begin(s, t)
     }
     fn advance(&self, n: u64) {
-        self.0.advance(n)
+        self.inner.advance(n)
     }
     fn end(&self) {
-        self.0.end()
+        self.inner.end()
     }
     fn message(&self, m: &str) {
-        self.0.message(m)
+        self.inner.message(m)
+    }
+    fn should_stop(&self) -> bool {
+        self.armed && crate::progress::stopped()
     }
 }

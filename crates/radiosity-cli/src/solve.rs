@@ -11,7 +11,7 @@ use radiosity::pipeline::{solve_all, solve_scene};
 use radiosity::report::{ComparisonRow, Report};
 use radiosity::solve::StopReason;
 
-use crate::common::{energy_summary, exit_code, write_atomic, SolveFlags};
+use crate::common::{energy_summary, exit_code, write_atomic, Outputs, SolveFlags};
 use crate::plot::{convergence_png, Series};
 use crate::progress::CliProgress;
 
@@ -29,6 +29,15 @@ pub struct SolveArgs {
 pub fn run(a: SolveArgs) -> Result<ExitCode> {
     let t0 = Instant::now();
     let settings = a.solve.settings()?;
+    // Outputs are checked before any work.
+    let mut outputs = Outputs::default();
+    if let Some(p) = &a.solve.report {
+        outputs.add("--report", p);
+    }
+    if let Some(p) = &a.plot {
+        outputs.add("--plot", p);
+    }
+    outputs.check()?;
     a.solve.init_threads()?;
     let (scene, load_s) = a.solve.load_scene()?;
     let progress = CliProgress::new(a.solve.quiet);
@@ -75,6 +84,12 @@ fn summary(report: &Report) {
     if !report.comparison.is_empty() {
         eprintln!("{}", table(&report.comparison));
         eprintln!("reference: {}", report.reference_solver.as_deref().unwrap_or("-"));
+        if report.comparison.iter().any(|r| r.solver == "progressive" && r.stats.is_some()) {
+            eprintln!(
+                "progressive's iterations are single shots ({} per sweep); --max-iterations counts sweeps for every solver",
+                report.elements
+            );
+        }
     } else if let Some(s) = &report.solver {
         let err = s.error_estimate.map(|e| format!(", error ≈ {:.2} %", 100.0 * e)).unwrap_or_default();
         let rays = if s.rays > 0 { format!(", {} rays", s.rays) } else { String::new() };

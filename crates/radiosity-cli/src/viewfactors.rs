@@ -64,7 +64,7 @@ pub struct ViewfactorsArgs {
     /// Seed for every random choice (results do not depend on --threads).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Worker threads [default: all cores].
+    /// Worker threads, 1 to 1024 [default: all cores].
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
     /// Memory the matrix may use (e.g. 8G, 512M) [default: what the system has available].
@@ -109,12 +109,13 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
     }
     let memory_limit = a.memory_limit.as_deref().map(parse_size).transpose()?;
     let ff = a.ff.options(method, a.seed, a.visibility_samples)?;
-    if let Some(n) = a.threads {
-        if n == 0 {
-            bail!("--threads must be at least 1");
-        }
-        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().context("setting up threads")?;
+    let mut outputs = crate::common::Outputs::default();
+    outputs.add("-o", &a.output);
+    if let Some(p) = &a.report {
+        outputs.add("--report", p);
     }
+    outputs.check()?;
+    crate::common::init_threads(a.threads)?;
 
     // Scene (a .vs3 file also carries its control values).
     let (mut desc, vs3) = if Path::new(&a.scene).extension().is_some_and(|e| e.eq_ignore_ascii_case("vs3")) {
@@ -263,20 +264,10 @@ fn summarize(d: &Diagnostics, seconds: f64, stats: &form_factor::Stats) {
 }
 
 /// Writes a file through `f` into a temporary file beside it, then renames it into place
-/// (so a failed or interrupted run leaves no half-written file).
+/// (so a failed or interrupted run leaves no half-written file; see
+/// [`crate::common::write_atomic_with`]).
 fn write_atomic_stream(path: &Path, f: impl FnOnce(BufWriter<File>) -> Result<()>) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().with_context(|| format!("{}: not a file name", path.display()))?;
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create folder {}", dir.display()))?;
-    let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
-    let file = File::create(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
-    match f(BufWriter::with_capacity(1 << 20, file)) {
-        Ok(()) => std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display())),
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(e)
-        }
-    }
+    crate::common::write_atomic_with(path, f)
 }
 
 /// `8G`, `512M`, `1.5GiB`, `100000` (bytes).

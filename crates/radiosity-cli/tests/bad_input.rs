@@ -159,3 +159,258 @@ fn camera_json_errors() {
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains(&at("cam-syntax.json", 3)), "{err}");
 }
+
+// ---- The hostile-input audit: each case is refused before any work, with a message that
+// names the option or file and the reason, or gives a correct result.
+
+/// Runs `radiosity <args>` in `dir`; returns (exit code, stderr, seconds).
+fn run_in(dir: &Path, args: &[&str]) -> (Option<i32>, String, f64) {
+    let t = std::time::Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_radiosity")).args(args).current_dir(dir).output().unwrap();
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned(), t.elapsed().as_secs_f64())
+}
+
+fn case_dir(name: &str) -> PathBuf {
+    let d = tmp(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The refusal of a run: exit code 1, no panic, stderr naming every one of `named`, and no
+/// sign that the work started (no solver iteration, no element count).
+fn refused(code: Option<i32>, err: &str, named: &[&str]) {
+    assert_eq!(code, Some(1), "exit code {code:?}: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    for n in named {
+        assert!(err.contains(n), "stderr should name {n}: {err}");
+    }
+    assert!(!err.contains(" iteration ") && !err.contains(" elements, "), "the work started: {err}");
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn time_budget_1e300_is_refused_not_a_panic() {
+    let d = case_dir("time-budget");
+    for t in ["1e300", "inf", "0", "-5"] {
+        let t = &format!("--time-budget={t}");
+        let (code, err, _) = run_in(&d, &["solve", "furnace", "--mesh-size", "1", t, "--report", "r.json"]);
+        refused(code, &err, &["--time-budget"]);
+    }
+    let (_, err, _) = run_in(&d, &["solve", "furnace", "--mesh-size", "1", "--time-budget", "1e300"]);
+    assert!(err.contains("at most 1e9 seconds"), "{err}");
+    assert!(files_in(&d).is_empty(), "{:?}", files_in(&d));
+    // A large but sane budget works.
+    let (code, err, _) = run_in(&d, &["solve", "furnace", "--mesh-size", "1", "--time-budget", "1e9", "-q", "--report", "r.json"]);
+    assert_eq!(code, Some(0), "{err}");
+}
+
+#[test]
+fn image_sizes_zero_absurd_or_beyond_memory_are_refused() {
+    let d = case_dir("image-size");
+    for (flag, v) in [("--width", "0"), ("--height", "0"), ("--width", "65536"), ("--height", "100000"), ("--width", "12.5")] {
+        let (code, err, _) = run_in(&d, &["render", "furnace", flag, v, "-o", "x.png"]);
+        assert_eq!(code, Some(2), "{flag} {v}: {err}");
+        assert!(err.contains(flag) && (err.contains("between 1 and 65535") || err.contains("whole number")), "{err}");
+    }
+    // 65535² passes parsing but its buffers (hundreds of GiB) exceed any memory available.
+    let (code, err, secs) =
+        run_in(&d, &["render", "furnace", "--width", "65535", "--height", "65535", "--render", "gouraud", "-o", "x.png"]);
+    refused(code, &err, &["65535×65535", "memory", "--width/--height"]);
+    assert!(secs < 10.0, "{secs} s before the refusal");
+    assert!(files_in(&d).is_empty(), "{:?}", files_in(&d));
+}
+
+#[test]
+fn duplicate_view_names_are_refused_naming_the_file_and_the_name() {
+    let d = case_dir("dup-views");
+    let cam = r#""position": [0.5, 0.5, 0.05], "look_at": [0.5, 0.5, 1], "up": [0, 1, 0], "vfov_deg": 60"#;
+    std::fs::write(d.join("views.json"), format!("[{{\"name\": \"a\", {cam}}}, {{\"name\": \"b\", {cam}}}, {{\"name\": \"a\", {cam}}}]")).unwrap();
+    let (code, err, _) = run_in(&d, &["render", "furnace", "--views", "views.json", "-o", "out.png", "--width", "8", "--height", "8"]);
+    refused(code, &err, &["views.json", "'a'", "views 0 and 2", "distinct"]);
+    assert_eq!(files_in(&d), ["views.json"]);
+}
+
+#[test]
+fn outputs_that_are_one_file_are_refused_before_any_work() {
+    let d = case_dir("same-output");
+    let base = ["render", "furnace", "--mesh-size", "0.5", "--width", "8", "--height", "8"];
+    std::fs::create_dir_all(d.join("sub")).unwrap();
+    for (extra, named) in [
+        (&["-o", "x.png", "--exr", "x.png"][..], &["-o x.png", "--exr x.png"][..]),
+        (&["-o", "x.png", "--report", "x.png"], &["-o x.png", "--report x.png"]),
+        (&["-o", "x.png", "--report", "./sub/../x.png"], &["-o x.png", "--report ./sub/../x.png"]),
+        (&["-o", "x.png", "--frames", ".", "--report", "frames.json"], &["--frames", "--report frames.json"]),
+    ] {
+        let (code, err, _) = run_in(&d, &[&base[..], extra].concat());
+        refused(code, &err, &[named, &["outputs must be distinct"]].concat());
+        assert_eq!(files_in(&d), ["sub"], "{extra:?}");
+    }
+    let (code, err, _) = run_in(&d, &["solve", "furnace", "--report", "p.png", "--plot", "p.png"]);
+    refused(code, &err, &["--report p.png", "--plot p.png", "distinct"]);
+    // A view's image (out_b.png for view "b") and the report.
+    let cam = r#""position": [0.5, 0.5, 0.05], "look_at": [0.5, 0.5, 1], "up": [0, 1, 0], "vfov_deg": 60"#;
+    let views = d.join("sub/views.json");
+    std::fs::write(&views, format!("[{{\"name\": \"a\", {cam}}}, {{\"name\": \"b\", {cam}}}]")).unwrap();
+    let (code, err, _) = run_in(&d, &[&base[..], &["--views", "sub/views.json", "-o", "out.png", "--report", "out_b.png"]].concat());
+    refused(code, &err, &["-o out_b.png", "--report out_b.png", "distinct"]);
+    assert_eq!(files_in(&d), ["sub"]);
+}
+
+#[cfg(unix)]
+#[test]
+fn special_files_and_directories_are_never_replaced() {
+    use std::os::unix::fs::FileTypeExt;
+    let d = case_dir("special");
+    assert!(Command::new("mkfifo").arg(d.join("fifo")).status().unwrap().success());
+    std::fs::create_dir_all(d.join("folder")).unwrap();
+    for (flag, target, why) in [
+        ("-o", "fifo", "FIFO"),
+        ("--report", "fifo", "FIFO"),
+        ("--exr", "fifo", "FIFO"),
+        ("-o", "folder", "is a directory"),
+        ("--report", "folder", "is a directory"),
+    ] {
+        let mut args = vec!["render", "furnace", "--mesh-size", "0.5", "--width", "8", "--height", "8"];
+        if flag != "-o" {
+            args.extend(["-o", "ok.png"]);
+        }
+        args.extend([flag, target]);
+        let (code, err, _) = run_in(&d, &args);
+        refused(code, &err, &[flag, target, why]);
+        assert!(std::fs::metadata(d.join("fifo")).unwrap().file_type().is_fifo());
+        assert!(d.join("folder").is_dir());
+        assert_eq!(files_in(&d), ["fifo", "folder"]);
+    }
+    // A folder that cannot be created (a file is in the way).
+    std::fs::write(d.join("plain"), b"").unwrap();
+    let (code, err, _) = run_in(&d, &["solve", "furnace", "--report", "plain/r.json"]);
+    refused(code, &err, &["--report", "plain", "not a folder"]);
+    // viewfactors checks its outputs too.
+    let (code, err, _) = run_in(&d, &["viewfactors", "furnace", "-o", "fifo", "--format", "csv"]);
+    refused(code, &err, &["-o", "fifo", "FIFO"]);
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn outputs_in_a_read_only_folder_are_refused_before_the_solve() {
+    use std::os::unix::fs::PermissionsExt;
+    let d = case_dir("read-only");
+    let ro = d.join("ro");
+    std::fs::create_dir_all(&ro).unwrap();
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
+    // Root writes into a mode-555 folder anyway; /proc refuses everyone.
+    let target = if running_as_root() { PathBuf::from("/proc/radiosity-report.json") } else { ro.join("r.json") };
+    let (code, err, _) = run_in(&d, &["solve", "cornell", "--report", target.to_str().unwrap()]);
+    refused(code, &err, &["--report", "cannot write in folder"]);
+    assert!(!target.exists());
+    assert!(std::fs::read_dir(&ro).unwrap().next().is_none(), "files left in the read-only folder");
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
+}
+
+/// True when the tests run as root (uid 0), read from /proc.
+#[cfg(target_os = "linux")]
+fn running_as_root() -> bool {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| s.lines().find(|l| l.starts_with("Uid:")).map(|l| l.split_whitespace().nth(1) == Some("0")))
+        .unwrap_or(false)
+}
+
+#[test]
+fn direct_solver_too_large_is_refused_right_after_meshing() {
+    let d = case_dir("direct");
+    // ~23 000 elements: a dense matrix of 4 GiB, over the 2 GiB limit; the form factors alone
+    // would take minutes.
+    let (code, err, secs) = run_in(&d, &["solve", "cornell", "--solver", "direct", "--mesh-size", "10", "--report", "r.json"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("the direct solve of") && err.contains("limit 2.0 GiB") && err.contains("--solver gauss-seidel"), "{err}");
+    assert!(secs < 20.0, "refused after {secs} s");
+    assert!(files_in(&d).is_empty());
+}
+
+#[test]
+fn element_cap_advice_never_repeats_the_size_in_use() {
+    let d = case_dir("cap");
+    // Fewer elements allowed than the scene has polygons: no mesh size can help.
+    let (code, err, _) = run_in(&d, &["solve", "furnace", "--mesh-size", "1.4142", "--max-elements", "5"]);
+    refused(code, &err, &["6 polygons", "raise --max-elements to at least 6"]);
+    assert!(!err.contains("or larger"), "{err}");
+    // Otherwise the advice is a larger size that meets the cap.
+    let (code, err, _) = run_in(&d, &["solve", "furnace", "--mesh-size", "0.01", "--max-elements", "600"]);
+    refused(code, &err, &["limit 600", "use --mesh-size"]);
+    let size = err.split("use --mesh-size ").nth(1).unwrap().split(' ').next().unwrap();
+    assert!(size.parse::<f64>().unwrap() > 0.01, "{err}");
+    let (code, err, _) = run_in(&d, &["solve", "furnace", "--mesh-size", size, "--max-elements", "600", "-q", "--report", "r.json"]);
+    assert_eq!(code, Some(0), "the advised --mesh-size {size} is refused: {err}");
+}
+
+#[test]
+fn thread_counts_out_of_range_are_refused_at_once() {
+    let d = case_dir("threads");
+    for args in [
+        &["solve", "cornell", "--threads", "5000"][..],
+        &["render", "cornell", "--threads", "5000", "-o", "x.png"],
+        &["solve", "cornell", "--threads", "0"],
+        &["viewfactors", "cornell", "-o", "f.csv", "--threads", "5000"],
+    ] {
+        let (code, err, secs) = run_in(&d, args);
+        refused(code, &err, &["--threads", "between 1 and 1024"]);
+        assert!(secs < 5.0, "{args:?}: {secs} s");
+    }
+    assert!(files_in(&d).is_empty());
+}
+
+/// An OBJ cube of side 1 whose faces look inwards (a closed room), without a camera.
+fn closed_room(d: &Path) -> PathBuf {
+    std::fs::write(d.join("room.mtl"), "newmtl wall\nKd 0.5 0.5 0.5\nKe 1 1 1\n").unwrap();
+    let mut obj = String::from("mtllib room.mtl\nusemtl wall\n");
+    for (x, y, z) in [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)] {
+        obj.push_str(&format!("v {x} {y} {z}\n"));
+    }
+    // Counter-clockwise seen from inside.
+    for f in ["1 2 3 4", "5 8 7 6", "1 5 6 2", "4 3 7 8", "1 4 8 5", "2 6 7 3"] {
+        obj.push_str(&format!("f {f}\n"));
+    }
+    let p = d.join("room.obj");
+    std::fs::write(&p, obj).unwrap();
+    p
+}
+
+#[test]
+fn camera_that_sees_only_back_faces_or_nothing_warns() {
+    let d = case_dir("black");
+    let base = ["render", "furnace", "--mesh-size", "0.5", "--width", "16", "--height", "16", "--render", "gouraud", "-o", "x.png"];
+    // Outside the closed furnace, looking at it.
+    let (code, err, _) = run_in(&d, &[&base[..], &["--eye", "0.5,0.5,-2", "--look-at", "0.5,0.5,0.5"]].concat());
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("warning: view 'main': the camera at (0.5, 0.5, -2) sees only back faces"), "{err}");
+    assert!(err.contains("use --two-sided or move the camera inside"), "{err}");
+    // Two-sided walls are seen from outside: no warning.
+    let (_, err, _) = run_in(&d, &[&base[..], &["--eye", "0.5,0.5,-2", "--look-at", "0.5,0.5,0.5", "--two-sided"]].concat());
+    assert!(!err.contains("warning"), "{err}");
+    // Looking away from everything.
+    let (_, err, _) = run_in(&d, &[&base[..], &["--eye", "0.5,0.5,-2", "--look-at", "0.5,0.5,-3"]].concat());
+    assert!(err.contains("sees no surface"), "{err}");
+    // The furnace's own camera is inside: no warning.
+    let (_, err, _) = run_in(&d, &base);
+    assert!(!err.contains("warning"), "{err}");
+}
+
+#[test]
+fn default_camera_of_a_closed_room_is_placed_inside() {
+    let d = case_dir("room");
+    let room = closed_room(&d);
+    let (code, err, _) = run_in(&d, &["render", room.to_str().unwrap(), "--mesh-size", "0.5", "--width", "16", "--height", "16", "--render", "gouraud", "-o", "x.png", "--exr", "x.exr"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("using a camera inside"), "{err}");
+    assert!(!err.contains("warning"), "{err}");
+    let img = radiosity::output::exr::read(&d.join("x.exr")).unwrap();
+    let lit = img.pixels.iter().filter(|p| p.x > 0.0).count();
+    assert_eq!(lit, 16 * 16, "the room fills the image from inside");
+}

@@ -100,3 +100,62 @@ fn sigint_during_a_stochastic_solve_writes_the_report() {
     assert!(r["energy"]["imbalance"].as_f64().unwrap() < 1e-9);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn sigint_during_rendering_many_views_stops_promptly_with_code_130() {
+    use std::time::{Duration, Instant};
+    let dir = tempdir("render-views");
+    // 40 large final-gather views: minutes of rendering if the interrupt were ignored.
+    let views: Vec<String> = (0..40)
+        .map(|k| {
+            let x = 200 + 4 * k;
+            format!(r#"{{"name": "v{k}", "position": [{x}, 273, -800], "look_at": [278, 273, 280], "up": [0, 1, 0], "vfov_deg": 40}}"#)
+        })
+        .collect();
+    std::fs::write(dir.join("views.json"), format!("[{}]", views.join(","))).unwrap();
+    let args = ["render", "cornell", "--mesh-size", "110", "--views", "views.json", "-o", "shots/v.png", "--report", "r.json"];
+    let mut child = Command::new(env!("CARGO_BIN_EXE_radiosity"))
+        .args(args)
+        .args(["--width", "512", "--height", "512", "--spp", "8"])
+        .current_dir(&dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the program starts");
+    let reader = BufReader::new(child.stderr.take().unwrap());
+    let mut log = String::new();
+    let mut sent: Option<Instant> = None;
+    for line in reader.lines() {
+        let line = line.unwrap();
+        // The solve is done once the energy summary prints; rendering starts at once.
+        if line.starts_with("energy:") && sent.is_none() {
+            std::thread::sleep(Duration::from_millis(700));
+            assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+            sent = Some(Instant::now());
+        }
+        log.push_str(&line);
+        log.push('\n');
+    }
+    let status = child.wait().unwrap();
+    let sent = sent.unwrap_or_else(|| panic!("the render never started:\n{log}"));
+    let after = sent.elapsed().as_secs_f64();
+    assert_eq!(status.code(), Some(130), "{log}");
+    assert!(after < 15.0, "ran on {after:.1} s after the interrupt:\n{log}");
+    assert!(!log.contains("panicked"), "{log}");
+    assert!(log.contains("interrupted while rendering view"), "{log}");
+    // The report lists the views finished before the interrupt; each of their images is
+    // complete, and no other image (nor a temporary file) was written.
+    let r = report(&dir.join("r.json"));
+    let done: Vec<String> = r["views"].as_array().unwrap().iter().map(|v| v["name"].as_str().unwrap().to_string()).collect();
+    assert!(done.len() < 40, "{log}");
+    let written: Vec<String> = match std::fs::read_dir(dir.join("shots")) {
+        Ok(rd) => rd.map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect(),
+        Err(_) => Vec::new(),
+    };
+    assert_eq!(written.len(), done.len(), "written {written:?}, reported {done:?}");
+    for name in &done {
+        assert!(is_png(&dir.join(format!("shots/v_{name}.png"))), "{name}");
+    }
+    assert!(r["warnings"].as_array().unwrap().iter().any(|w| w.as_str().unwrap().contains("interrupted while rendering")));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -72,3 +72,41 @@ fn render_refuses_solver_all() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("radiosity solve"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn solver_all_max_iterations_caps_every_solver_in_its_documented_unit() {
+    // Finding 12: `--max-iterations 5` under `--solver all` let progressive run 5 × n shots,
+    // reported as thousands of "iterations". The cap is sweeps for every solver (n shots
+    // for progressive, whose report counts shots); nothing runs past 5 sweeps.
+    let dir = tempdir("all-max-iterations");
+    let args = ["solve", "furnace", "--solver", "all", "--max-iterations", "5", "--tolerance", "0", "--mesh-size", "0.25"];
+    let out = radiosity(&dir, &[&args[..], &["--rays", "20000", "--report", "r.json", "-q"]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("r.json")).unwrap()).unwrap();
+    let n = r["elements"].as_u64().unwrap();
+    assert_eq!(n, 96);
+    let rows = r["comparison"].as_array().unwrap();
+    assert_eq!(rows.len(), 7);
+    for row in rows {
+        let name = row["solver"].as_str().unwrap();
+        let s = &row["stats"];
+        let iterations = s["iterations"].as_u64().unwrap();
+        let last_sweeps = s["history"].as_array().unwrap().last().map_or(0.0, |h| h["sweeps"].as_f64().unwrap());
+        assert!(last_sweeps <= 5.0 + 1e-9, "{name}: {last_sweeps} sweeps");
+        if name == "progressive" {
+            assert_eq!(iterations, 5 * n, "progressive: shots");
+            assert_eq!(s["stop"], "max-iterations");
+            assert!((last_sweeps - 5.0).abs() < 1e-9);
+        } else {
+            assert!(iterations <= 5, "{name}: {iterations} iterations under --max-iterations 5");
+        }
+        if ["jacobi", "gauss-seidel", "shooting"].contains(&name) {
+            assert_eq!((iterations, s["stop"].as_str().unwrap()), (5, "max-iterations"), "{name}");
+        }
+    }
+    // The flag's help says what an iteration is for progressive.
+    let help = radiosity(&dir, &["solve", "--help"]);
+    let help = String::from_utf8_lossy(&help.stdout);
+    assert!(help.contains("sweeps of n shots"), "{help}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

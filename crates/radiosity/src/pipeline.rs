@@ -129,6 +129,7 @@ fn prepare(
     scene: Scene,
     settings: &Settings,
     form_factors: bool,
+    direct: bool,
     progress: &dyn Progress,
 ) -> Result<(Prepared, Option<mesh::adaptive::Refiner>)> {
     let mut timings = Timings::default();
@@ -136,23 +137,9 @@ fn prepare(
     let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
     let count = mesh::count_uniform(&scene, size);
     if count > settings.max_elements {
-        // The smallest size that meets the cap, by bisection on the count.
-        let (mut lo, mut hi) = (size, scene.diagonal().max(size));
-        for _ in 0..60 {
-            let mid = (lo * hi).sqrt();
-            if mesh::count_uniform(&scene, mid) > settings.max_elements {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        let many = if count == u64::MAX { "more than 10^19".to_string() } else { count.to_string() };
-        return Err(Error::Invalid(format!(
-            "mesh size {size:.4e} would create {many} elements (limit {}); use --mesh-size {hi:.4e} or larger, or raise --max-elements",
-            settings.max_elements
-        )));
+        return Err(Error::Invalid(element_cap_advice(&scene, size, count, settings.max_elements)));
     }
-    let mut mesh = mesh::mesh_uniform(&scene, size);
+    let mut mesh = mesh::mesh_uniform_with(&scene, size, progress)?;
     timings.mesh = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -166,7 +153,7 @@ fn prepare(
     let refiner = match &settings.adaptive {
         Some(a) => {
             let mut r = mesh::adaptive::Refiner::new(&scene, &mesh);
-            let (stats, n) = mesh::adaptive::refine_a_priori(&scene, &rays, &mut r, a);
+            let (stats, n) = mesh::adaptive::refine_a_priori(&scene, &rays, &mut r, a, progress);
             refine_rays += n;
             refinement.push(stats);
             mesh = r.mesh().clone();
@@ -175,6 +162,13 @@ fn prepare(
         None => None,
     };
     timings.mesh += t.elapsed().as_secs_f64();
+    if progress.should_stop() {
+        return Err(Error::Cancelled);
+    }
+    // The direct solver's dense matrix is refused now, not after the form factors.
+    if direct {
+        solve::direct_check_memory(mesh.len(), settings.solve.direct_memory_limit)?;
+    }
     let prepared = Prepared {
         scene,
         mesh,
@@ -190,6 +184,50 @@ fn prepare(
         refine_rays,
     };
     Ok((prepared.with_factors(settings, form_factors, progress)?, refiner))
+}
+
+/// The error for a mesh size whose uniform mesh has `count` elements, over `limit`: the
+/// smallest size that meets the limit (found by bisection on the count, printed rounded up
+/// so that it is larger than `size` and still meets the limit) — or, when even one element
+/// per polygon is over the limit, that fact and the --max-elements it needs.
+fn element_cap_advice(scene: &Scene, size: f64, count: u64, limit: u64) -> String {
+    let many = if count == u64::MAX { "more than 10^19".to_string() } else { count.to_string() };
+    let least = mesh::count_uniform(scene, f64::INFINITY);
+    if least > limit {
+        return format!(
+            "the scene's {} polygons make at least {least} elements even unsubdivided (one element per quad or \
+             triangle), over the limit of {limit}: no --mesh-size can meet it; raise --max-elements to at least {least}",
+            scene.polygons.len()
+        );
+    }
+    let (mut lo, mut hi) = (size, scene.diagonal().max(size));
+    while mesh::count_uniform(scene, hi) > limit && hi < f64::MAX / 4.0 {
+        lo = hi;
+        hi *= 2.0;
+    }
+    for _ in 0..60 {
+        let mid = (lo * hi).sqrt();
+        if mesh::count_uniform(scene, mid) > limit {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    // The shortest rounding (nearest, else up) that is larger than `size`, prints
+    // differently, and still meets the limit.
+    let mut suggested = hi;
+    'digits: for digits in 1..=17 {
+        let scale = 10f64.powi(digits - 1 - hi.log10().floor() as i32);
+        for r in [(hi * scale).round() / scale, (hi * scale).ceil() / scale] {
+            if r > size && format!("{r}") != format!("{size}") && mesh::count_uniform(scene, r) <= limit {
+                suggested = r;
+                break 'digits;
+            }
+        }
+    }
+    format!(
+        "mesh size {size:.4e} would create {many} elements (limit {limit}); use --mesh-size {suggested} or larger, or raise --max-elements"
+    )
 }
 
 impl Prepared {
@@ -297,7 +335,8 @@ pub fn solve_scene_observed(
     mut observer: Option<&mut FrameObserver<'_>>,
 ) -> Result<Solved> {
     let stochastic = settings.solver.is_stochastic();
-    let (mut prepared, mut refiner) = prepare(scene, settings, !stochastic, progress)?;
+    let (mut prepared, mut refiner) =
+        prepare(scene, settings, !stochastic, settings.solver == Solver::Direct, progress)?;
     let mut pass = 0;
     let mut seconds = 0.0;
     loop {
@@ -368,7 +407,8 @@ pub struct Comparison {
 /// (`settings.solver` is ignored), for comparison. After an interrupt the solver running
 /// keeps what it has and the remaining ones are skipped.
 pub fn solve_all(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Comparison> {
-    let (prepared, _) = prepare(scene, settings, true, progress)?;
+    // `direct` refuses for itself here: the other solvers still run.
+    let (prepared, _) = prepare(scene, settings, true, false, progress)?;
     let mut runs = Vec::new();
     let mut seconds = 0.0;
     for solver in Solver::ALL {
@@ -587,5 +627,82 @@ impl Solved {
             refinement: self.refinement.clone(),
             ..Default::default()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::builtin;
+    use crate::NoProgress;
+    use std::sync::Mutex;
+
+    /// Records the stages begun; stops once `stop_at` is begun (None: never).
+    #[derive(Default)]
+    struct Stages {
+        begun: Mutex<Vec<String>>,
+        stop_at: Option<&'static str>,
+    }
+    impl Progress for Stages {
+        fn begin(&self, stage: &str, _total: u64) {
+            self.begun.lock().unwrap().push(stage.to_string());
+        }
+        fn should_stop(&self) -> bool {
+            self.stop_at.is_some_and(|s| self.begun.lock().unwrap().iter().any(|b| b == s))
+        }
+    }
+
+    fn furnace() -> Scene {
+        Scene::from_desc(builtin::furnace(0.5, 1.0)).unwrap()
+    }
+
+    #[test]
+    fn element_cap_below_the_polygon_count_says_so_and_suggests_max_elements() {
+        let settings = Settings { mesh_size: Some(10.0), max_elements: 3, ..Default::default() };
+        let err = solve_scene(furnace(), &settings, &NoProgress).err().expect("refused").to_string();
+        assert!(err.contains("6 polygons") && err.contains("at least 6"), "{err}");
+        assert!(err.contains("raise --max-elements to at least 6"), "{err}");
+        assert!(!err.contains("--mesh-size 1") && !err.contains("or larger"), "advises a mesh size: {err}");
+    }
+
+    #[test]
+    fn element_cap_advice_is_a_larger_size_that_meets_the_limit() {
+        let scene = furnace();
+        for (size, limit) in [(0.01, 600u64), (0.1, 599), (0.5, 23)] {
+            let count = mesh::count_uniform(&scene, size);
+            assert!(count > limit);
+            let msg = element_cap_advice(&scene, size, count, limit);
+            let suggested: f64 = msg.split("--mesh-size ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap();
+            assert!(suggested > size, "{msg}");
+            assert!(mesh::count_uniform(&scene, suggested) <= limit, "{msg}");
+            assert_ne!(format!("{suggested:.4e}"), format!("{size:.4e}"), "{msg}");
+        }
+    }
+
+    #[test]
+    fn direct_solver_too_large_is_refused_before_form_factors() {
+        let mut settings = Settings { mesh_size: Some(0.1), solver: Solver::Direct, ..Default::default() };
+        settings.solve.direct_memory_limit = 1 << 20; // 600 elements need 2.9 MB
+        let progress = Stages::default();
+        let err = solve_scene(furnace(), &settings, &progress).err().expect("refused");
+        assert!(matches!(err, Error::TooLarge { .. }), "{err}");
+        let msg = err.to_string();
+        assert!(msg.contains("direct solve of 600 elements") && msg.contains("--solver gauss-seidel"), "{msg}");
+        let begun = progress.begun.lock().unwrap().clone();
+        assert_eq!(begun, ["mesh"], "stages begun before the refusal");
+        // Within the limit it solves.
+        settings.solve.direct_memory_limit = 1 << 30;
+        assert!(solve_scene(furnace(), &settings, &NoProgress).is_ok());
+    }
+
+    #[test]
+    fn interrupt_during_meshing_cancels_before_form_factors() {
+        let progress = Stages { stop_at: Some("mesh"), ..Default::default() };
+        let settings = Settings { mesh_size: Some(0.1), ..Default::default() };
+        let err = solve_scene(furnace(), &settings, &progress).err().expect("cancelled");
+        assert!(matches!(err, Error::Cancelled), "{err}");
+        assert_eq!(*progress.begun.lock().unwrap(), ["mesh"]);
+        let err = solve_all(furnace(), &settings, &Stages { stop_at: Some("mesh"), ..Default::default() }).err().unwrap();
+        assert!(matches!(err, Error::Cancelled), "{err}");
     }
 }

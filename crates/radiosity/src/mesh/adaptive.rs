@@ -83,7 +83,7 @@ use crate::accel::SceneRays;
 use crate::render::gather::{direct_irradiance, emitters};
 use crate::sampling::{rng_for, stratified};
 use crate::scene::{newell_normal, polygon_centroid, Scene};
-use crate::{luminance, Rgb};
+use crate::{luminance, Progress, Rgb};
 
 /// How to refine.
 #[derive(Clone, Debug, PartialEq)]
@@ -687,8 +687,15 @@ pub fn a_priori_errors(scene: &Scene, mesh: &Mesh, rays: &SceneRays, opts: &Opti
 /// the new leaves only) and splitting, until no leaf is over the threshold, every one over
 /// it is at `opts.max_depth`, or `opts.max_elements` is reached: one level per round, the
 /// largest errors first when the limit cuts a round short. Returns what it did and the
-/// rays cast.
-pub fn refine_a_priori(scene: &Scene, rays: &SceneRays, refiner: &mut Refiner, opts: &Options) -> (PassStats, u64) {
+/// rays cast. [`Progress::should_stop`] is polled before every round: after an interrupt the
+/// rounds done so far are kept and the caller decides (the pipeline then cancels).
+pub fn refine_a_priori(
+    scene: &Scene,
+    rays: &SceneRays,
+    refiner: &mut Refiner,
+    opts: &Options,
+    progress: &dyn Progress,
+) -> (PassStats, u64) {
     let n0 = refiner.mesh().len();
     let mut total = PassStats { elements_before: n0, elements_after: n0, ..Default::default() };
     let mut nrays = 0;
@@ -698,6 +705,9 @@ pub fn refine_a_priori(scene: &Scene, rays: &SceneRays, refiner: &mut Refiner, o
     let mut cache: HashMap<u32, f64> = HashMap::new();
     let mut scale = None;
     for _ in 0..opts.max_depth {
+        if progress.should_stop() {
+            break;
+        }
         let (leaf_mesh, ids) = refiner.leaf_mesh();
         let new: Vec<usize> = (0..ids.len()).filter(|&i| !cache.contains_key(&ids[i])).collect();
         let sub = Mesh {
@@ -942,13 +952,26 @@ mod tests {
     }
 
     #[test]
+    fn a_priori_refinement_stops_on_interrupt() {
+        let scene = Scene::from_desc(builtin::cornell()).unwrap();
+        let rays = SceneRays::new(&scene.polygons);
+        let mesh = mesh_uniform(&scene, 60.0);
+        let mut r = Refiner::new(&scene, &mesh);
+        let stop = crate::progress::StopFlag::default();
+        stop.stop();
+        let (stats, nrays) = refine_a_priori(&scene, &rays, &mut r, &Options::default(), &stop);
+        // Interrupted before the first round: no rays, no splits, the uniform mesh kept.
+        assert_eq!((stats.splits, nrays, r.mesh().len()), (0, 0, mesh.len()), "{stats:?}");
+    }
+
+    #[test]
     fn cornell_floor_is_refined_at_the_block_bases_and_shadows_not_where_light_is_smooth() {
         let scene = Scene::from_desc(builtin::cornell()).unwrap();
         let rays = SceneRays::new(&scene.polygons);
         let mesh = mesh_uniform(&scene, 60.0);
         let mut r = Refiner::new(&scene, &mesh);
         let opts = Options::default();
-        let (stats, nrays) = refine_a_priori(&scene, &rays, &mut r, &opts);
+        let (stats, nrays) = refine_a_priori(&scene, &rays, &mut r, &opts, &crate::NoProgress);
         assert!(nrays > 0 && stats.splits > 0, "{stats:?}");
         assert!(r.mesh().len() <= opts.limit(mesh.len()));
         assert_invariants(&scene, r.mesh());
@@ -1011,7 +1034,7 @@ mod tests {
         let (errs, _) = a_priori_errors(&scene, &mesh, &rays, &Options::default());
         let worst = errs.iter().cloned().fold(0.0, f64::max);
         assert!(worst < 1e-9, "furnace a priori error {worst}");
-        let (stats, _) = refine_a_priori(&scene, &rays, &mut r, &Options::default());
+        let (stats, _) = refine_a_priori(&scene, &rays, &mut r, &Options::default(), &crate::NoProgress);
         assert_eq!((stats.splits, r.mesh().len()), (0, mesh.len()), "{stats:?}");
         // Refined anyway (every third element, twice): still B = E / (1 − ρ) everywhere.
         let opts = Options { threshold: 0.5, max_depth: 2, max_elements: Some(10_000), ..Default::default() };

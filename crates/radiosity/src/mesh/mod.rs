@@ -16,7 +16,7 @@ mod uniform;
 use glam::DVec3;
 
 pub use coverage::Receivers;
-pub use uniform::{count_uniform, mesh_uniform};
+pub use uniform::{count_uniform, mesh_uniform, mesh_uniform_with};
 
 use crate::scene::Scene;
 

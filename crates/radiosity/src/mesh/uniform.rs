@@ -12,6 +12,7 @@ use glam::DVec3;
 
 use super::{Element, Mesh, PatchElements, NO_VERTEX};
 use crate::scene::{polygon_centroid, Scene};
+use crate::{Error, Progress, Result};
 
 /// Number of elements [`mesh_uniform`] would create (without creating them), saturating.
 pub fn count_uniform(scene: &Scene, size: f64) -> u64 {
@@ -42,9 +43,21 @@ pub fn count_uniform(scene: &Scene, size: f64) -> u64 {
 /// `size <= 0` or non-finite leaves each polygon whole (one element per triangle/quad, fans
 /// for larger polygons).
 pub fn mesh_uniform(scene: &Scene, size: f64) -> Mesh {
+    mesh_uniform_with(scene, size, &crate::NoProgress).expect("NoProgress never stops")
+}
+
+/// [`mesh_uniform`] reporting one unit of progress per polygon ("mesh" stage) and polling
+/// [`Progress::should_stop`] before every polygon: an interrupt ends meshing with
+/// [`Error::Cancelled`] (a partial mesh is of no use).
+pub fn mesh_uniform_with(scene: &Scene, size: f64, progress: &dyn Progress) -> Result<Mesh> {
     let size = if size.is_finite() && size > 0.0 { size } else { f64::INFINITY };
     let mut mesh = Mesh { target_size: size, ..Default::default() };
+    progress.begin("mesh", scene.polygons.len() as u64);
     for (pi, poly) in scene.polygons.iter().enumerate() {
+        if progress.should_stop() {
+            progress.end();
+            return Err(Error::Cancelled);
+        }
         let first = mesh.elements.len() as u32;
         let mut b = PatchBuilder { mesh: &mut mesh, patch: pi as u32, normal: poly.normal, map: HashMap::new() };
         let v = &poly.vertices;
@@ -72,8 +85,10 @@ pub fn mesh_uniform(scene: &Scene, size: f64) -> Mesh {
         }
         let count = mesh.elements.len() as u32 - first;
         mesh.patches.push(PatchElements { first, count });
+        progress.advance(1);
     }
-    mesh
+    progress.end();
+    Ok(mesh)
 }
 
 /// Fan triangles from `v[0]` (a triangle is its own fan), each cut into k² triangles with a
@@ -255,6 +270,34 @@ mod tests {
         assert!(mesh.positions.len() < 2 * mesh.elements.len());
         let floor = mesh.patches[0];
         assert_eq!(floor.count, 12 * 12);
+    }
+
+    /// Stops once `after` units of progress were reported; counts them.
+    struct StopAfter {
+        after: u64,
+        done: std::sync::atomic::AtomicU64,
+    }
+    impl Progress for StopAfter {
+        fn advance(&self, n: u64) {
+            self.done.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+        }
+        fn should_stop(&self) -> bool {
+            self.done.load(std::sync::atomic::Ordering::Relaxed) >= self.after
+        }
+    }
+
+    #[test]
+    fn meshing_interrupt_stops_after_the_polygon_in_progress() {
+        let scene = Scene::from_desc(builtin::cornell()).unwrap();
+        let stop = StopAfter { after: 3, done: Default::default() };
+        let r = mesh_uniform_with(&scene, 5.0, &stop);
+        assert!(matches!(r, Err(Error::Cancelled)), "meshing went on after the interrupt");
+        assert_eq!(stop.done.load(std::sync::atomic::Ordering::Relaxed), 3, "polygons meshed after the stop");
+        // Without an interrupt: every polygon, and the same mesh as mesh_uniform.
+        let all = StopAfter { after: u64::MAX, done: Default::default() };
+        let m = mesh_uniform_with(&scene, 50.0, &all).unwrap();
+        assert_eq!(all.done.load(std::sync::atomic::Ordering::Relaxed), scene.polygons.len() as u64);
+        assert_eq!(m.elements, mesh_uniform(&scene, 50.0).elements);
     }
 
     #[test]

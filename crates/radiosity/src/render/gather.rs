@@ -296,3 +296,65 @@ pub fn render(
     progress.end();
     (img, total_rays)
 }
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use std::sync::atomic::{AtomicU64, Ordering};
+
+    use crate::pipeline::{solve_scene, Settings, Solved};
+    use crate::render::gouraud::ElementTracer;
+    use crate::scene::{builtin, Scene};
+    use crate::Progress;
+
+    /// Asks to stop once `after` units of progress (image rows) were reported.
+    pub(crate) struct StopAfter {
+        pub after: u64,
+        pub done: AtomicU64,
+    }
+    impl StopAfter {
+        pub fn new(after: u64) -> Self {
+            StopAfter { after, done: AtomicU64::new(0) }
+        }
+        pub fn done(&self) -> u64 {
+            self.done.load(Ordering::Relaxed)
+        }
+    }
+    impl Progress for StopAfter {
+        fn advance(&self, n: u64) {
+            self.done.fetch_add(n, Ordering::Relaxed);
+        }
+        fn should_stop(&self) -> bool {
+            self.done() >= self.after
+        }
+    }
+
+    /// The furnace seen from its own camera (inside): every pixel shows a lit wall.
+    pub(crate) fn furnace() -> (Solved, ElementTracer) {
+        let scene = Scene::from_desc(builtin::furnace(0.5, 1.0)).unwrap();
+        let solved = solve_scene(scene, &Settings { mesh_size: Some(0.25), ..Default::default() }, &crate::NoProgress).unwrap();
+        let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
+        let tracer = ElementTracer::new(&solved.mesh, &two);
+        (solved, tracer)
+    }
+
+    /// Rows with at least one lit pixel.
+    pub(crate) fn lit_rows(img: &crate::render::Image) -> usize {
+        img.pixels.chunks(img.width).filter(|r| r.iter().any(|p| p.max_element() > 0.0)).count()
+    }
+
+    #[test]
+    fn final_gather_stops_on_interrupt() {
+        let (solved, tracer) = furnace();
+        let cam = solved.scene.camera.unwrap();
+        let opts = super::Options { width: 32, height: 256, spp_axis: 2, shadow_axis: 1, seed: 0 };
+        let (_, hv) = solved.indirect_irradiance();
+        let (full, _) = solved.render_gather(&cam, &opts, &tracer, &hv, &crate::NoProgress);
+        assert_eq!(lit_rows(&full), 256, "the furnace fills the image");
+        let stop = StopAfter::new(3);
+        let (img, _) = solved.render_gather(&cam, &opts, &tracer, &hv, &stop);
+        // Rows already started when the stop was seen finish; no other row is drawn.
+        let most = 3 + rayon::current_num_threads() as u64;
+        assert!(stop.done() <= most, "{} rows after a stop at 3", stop.done());
+        assert_eq!(lit_rows(&img) as u64, stop.done());
+    }
+}

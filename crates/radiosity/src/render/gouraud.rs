@@ -232,6 +232,21 @@ mod tests {
     use super::*;
 
     #[test]
+    fn gouraud_render_stops_on_interrupt() {
+        use crate::render::gather::tests::{furnace, lit_rows, StopAfter};
+        let (solved, tracer) = furnace();
+        let cam = solved.scene.camera.unwrap();
+        for shading in [Shading::Gouraud, Shading::Flat] {
+            let opts = Options { width: 32, height: 256, spp_axis: 2, shading };
+            assert_eq!(lit_rows(&solved.render(&cam, &opts, &tracer, &crate::NoProgress)), 256);
+            let stop = StopAfter::new(5);
+            let img = solved.render(&cam, &opts, &tracer, &stop);
+            assert!(stop.done() <= 5 + rayon::current_num_threads() as u64, "{} rows after a stop at 5", stop.done());
+            assert_eq!(lit_rows(&img) as u64, stop.done());
+        }
+    }
+
+    #[test]
     fn inverse_bilinear_roundtrip() {
         let c = [
             DVec3::new(0., 0., 0.),

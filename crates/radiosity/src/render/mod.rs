@@ -39,3 +39,125 @@ impl Image {
         self.pixels[y * self.width + x]
     }
 }
+
+/// Bytes of the buffers one view's renderer allocates for a `width × height` image with
+/// `spp_axis²` samples per pixel: the radiance image (3 × f64 per pixel) and, for the
+/// Gouraud/flat renderer (`gather == false`), its supersampled z-buffer of element ids and
+/// parameters (4 + 8 bytes per sample). Saturating, so absurd sizes compare as huge.
+pub fn image_memory_bytes(width: usize, height: usize, spp_axis: usize, gather: bool) -> u64 {
+    let pixels = (width as u64).saturating_mul(height as u64);
+    let image = pixels.saturating_mul(std::mem::size_of::<Rgb>() as u64);
+    if gather {
+        image
+    } else {
+        let s = spp_axis.max(1) as u64;
+        image.saturating_add(pixels.saturating_mul(s * s).saturating_mul(12))
+    }
+}
+
+/// What a view's primary rays hit, on a coarse grid of rays through the image.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ViewCoverage {
+    /// Rays that hit the front of a surface (what the image shows).
+    pub front: usize,
+    /// Rays that hit the back of a one-sided surface (drawn black).
+    pub back: usize,
+    /// Rays that hit nothing (background, black).
+    pub background: usize,
+}
+
+impl ViewCoverage {
+    /// Rays cast.
+    pub fn total(&self) -> usize {
+        self.front + self.back + self.background
+    }
+
+    /// Why the image is (nearly) black, if it is: fewer than 1 % of the rays reach the
+    /// front of a surface; then it sees back faces (at least 1 % of the rays meet one) or
+    /// nothing. The text completes "the camera …".
+    pub fn problem(&self) -> Option<String> {
+        let n = self.total().max(1);
+        if self.front * 100 >= n {
+            return None;
+        }
+        Some(if self.back * 100 >= n {
+            format!(
+                "sees only back faces of one-sided surfaces ({:.0} % of the image): the image is black; use --two-sided or move the camera inside",
+                100.0 * self.back as f64 / n as f64
+            )
+        } else {
+            "sees no surface: the image is black (is it looking away from the scene?)".to_string()
+        })
+    }
+}
+
+/// Casts `n × n` rays through the image of `camera` (pixel centres of an `n × n` image of
+/// the same aspect as `width × height`) against the scene's polygons and counts what they
+/// hit first — the renderers' visibility (the back of one side of a two-sided pair shows
+/// its twin) and front test, without a mesh or a solution, so it can run before solving.
+pub fn view_coverage(
+    scene: &crate::scene::Scene,
+    rays: &crate::accel::SceneRays,
+    camera: &crate::scene::Camera,
+    width: usize,
+    height: usize,
+    n: usize,
+) -> ViewCoverage {
+    let (w, h) = (width.max(1), height.max(1));
+    let cam = PinholeCamera::new(camera, w, h);
+    let n = n.max(1);
+    let mut c = ViewCoverage::default();
+    for j in 0..n {
+        for i in 0..n {
+            let x = (i as f64 + 0.5) / n as f64 * w as f64;
+            let y = (j as f64 + 0.5) / n as f64 * h as f64;
+            let dir = cam.direction(x, y);
+            match rays.closest_facing(cam.eye.as_vec3(), dir.as_vec3(), f32::INFINITY, None) {
+                None => c.background += 1,
+                Some((_, p)) => {
+                    let poly = &scene.polygons[p as usize];
+                    if !poly.two_sided && poly.normal.dot(dir) >= 0.0 {
+                        c.back += 1;
+                    } else {
+                        c.front += 1;
+                    }
+                }
+            }
+        }
+    }
+    c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Camera;
+    use glam::DVec3;
+
+    #[test]
+    fn view_coverage_tells_back_faces_from_background() {
+        let scene = crate::scene::Scene::from_desc(crate::scene::builtin::furnace(0.5, 1.0)).unwrap();
+        let rays = crate::accel::SceneRays::new(&scene.polygons);
+        let cov = |cam: &Camera| view_coverage(&scene, &rays, cam, 64, 48, 32);
+        let inside = cov(&scene.camera.unwrap());
+        assert_eq!((inside.front, inside.problem()), (32 * 32, None));
+        // Outside the closed box, looking at it: only the backs of the inward walls.
+        let outside = Camera { position: DVec3::new(0.5, 0.5, -2.0), look_at: DVec3::splat(0.5), up: DVec3::Y, vfov_deg: 45.0 };
+        let c = cov(&outside);
+        assert_eq!(c.front, 0);
+        let why = c.problem().unwrap();
+        assert!(why.contains("only back faces") && why.contains("--two-sided"), "{why}");
+        // Looking away: nothing at all.
+        let away = Camera { look_at: DVec3::new(0.5, 0.5, -3.0), ..outside };
+        let c = cov(&away);
+        assert_eq!(c.background, 32 * 32);
+        assert!(c.problem().unwrap().contains("sees no surface"));
+    }
+
+    #[test]
+    fn image_memory_counts_every_buffer() {
+        assert_eq!(image_memory_bytes(100, 10, 6, true), 24_000);
+        assert_eq!(image_memory_bytes(100, 10, 3, false), 24_000 + 9 * 12_000);
+        assert!(image_memory_bytes(65535, 65535, 64, false) > 1 << 40);
+    }
+}

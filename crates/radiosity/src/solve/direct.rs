@@ -27,18 +27,26 @@ pub fn memory_bytes(n: usize) -> u64 {
     8 * n * n + 64 * n
 }
 
-pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
-    let rows = sys.rows(Solver::Direct)?;
-    let n = sys.len();
+/// Refuses the direct solve of `n` elements when it needs more than `limit` bytes, with
+/// the error the solve itself gives; the pipeline calls it right after meshing, before any
+/// form factor is computed.
+pub fn check_memory(n: usize, limit: u64) -> Result<()> {
     let needed = memory_bytes(n);
-    if needed > mon.opts.direct_memory_limit {
+    if needed > limit {
         return Err(Error::TooLarge {
             what: format!("the direct solve of {n} elements (a dense {n}×{n} matrix)"),
             needed,
-            limit: mon.opts.direct_memory_limit,
+            limit,
             hint: "use --solver gauss-seidel or --solver progressive, which need only the form factors".into(),
         });
     }
+    Ok(())
+}
+
+pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
+    let rows = sys.rows(Solver::Direct)?;
+    let n = sys.len();
+    check_memory(n, mon.opts.direct_memory_limit)?;
     // Channels with identical reflectance share one factorisation.
     let mut groups: Vec<Vec<usize>> = Vec::new();
     for c in 0..3 {

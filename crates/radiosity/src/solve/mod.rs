@@ -56,6 +56,7 @@ use std::time::{Duration, Instant};
 use crate::transport::{SparseRows, Transport};
 use crate::{luminance, Error, Progress, Result, Rgb};
 
+pub use direct::{check_memory as direct_check_memory, memory_bytes as direct_memory_bytes};
 pub use stochastic::RaySystem;
 
 /// The linear system to solve.
@@ -181,8 +182,11 @@ pub const DIRECT_MEMORY_LIMIT: u64 = 2 << 30;
 pub struct Options {
     /// Stop once the relative power residual (or unshot power) is at most this.
     pub tolerance: f64,
-    /// Stop after this many iterations (sweeps or bounces; for progressive refinement,
-    /// shots are counted in units of `n` shots).
+    /// Stop after this many iterations: sweeps (bounces) for the gathering and shooting
+    /// solvers, ray iterations for the stochastic ones, and for progressive refinement
+    /// sweeps of `n` shots (`n` elements) — its reported iterations are single shots, so
+    /// it stops after at most `max_iterations × n` of them (its history's `sweeps` column
+    /// is the comparable count).
     pub max_iterations: usize,
     /// Stop after this much solver time.
     pub time_budget: Option<Duration>,
