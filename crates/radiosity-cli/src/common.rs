@@ -512,17 +512,22 @@ mod tests {
 
     #[cfg(target_os = "linux")]
     #[test]
-    fn atomic_write_to_a_full_device_fails() {
-        // /dev/full: every write fails with ENOSPC. The pre-check refuses it as a device; the
-        // write path (if reached, e.g. a target that became one) fails and keeps it intact.
-        let err = write_atomic(Path::new("/dev/full"), b"x").unwrap_err().to_string();
-        assert!(err.contains("/dev/full") && err.contains("character device"), "{err}");
+    fn atomic_write_to_a_special_file_fails_and_keeps_it() {
+        // A FIFO of our own stands in for a device such as /dev/full (never touch real
+        // device nodes from a test that runs as root): the write path refuses it and keeps it.
+        let d = dir("special");
+        let fifo = d.join("fifo");
+        let _ = std::fs::remove_file(&fifo);
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0, "mkfifo");
+        let err = write_atomic(&fifo, b"x").unwrap_err().to_string();
+        assert!(err.contains("FIFO"), "{err}");
         use std::os::unix::fs::FileTypeExt;
-        assert!(std::fs::metadata("/dev/full").unwrap().file_type().is_char_device());
+        assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
         let mut o = Outputs::default();
-        o.add("-o", Path::new("/dev/full"));
+        o.add("-o", &fifo);
         let err = o.check().unwrap_err().to_string();
-        assert!(err.contains("-o /dev/full") && err.contains("not a regular file"), "{err}");
+        assert!(err.contains("-o") && err.contains("not a regular file"), "{err}");
     }
 
     #[test]

@@ -152,7 +152,10 @@ fn free_elements(solved: &radiosity::pipeline::Solved, gap: f64) -> Vec<usize> {
         .filter(|&i| {
             let e = &mesh.elements[i];
             let own = &scene.polygons[e.patch as usize];
-            solved.receivers.open_fraction[i] >= 1.0
+            // The outside of the room sees nothing (B = E there): not part of the furnace.
+            let outside = own.back_side && (own.object == 0 || scene.objects[own.object as usize].name == "furnace-room");
+            !outside
+                && solved.receivers.open_fraction[i] >= 1.0
                 && scene.polygons.iter().enumerate().all(|(q, p)| {
                     q == e.patch as usize
                         || (p.two_sided && p.normal.dot(own.normal) < -0.999999 && (p.centroid() - own.centroid()).length() < 1e-9)
@@ -176,7 +179,7 @@ pub fn check_furnace(name: &str, scene: Scene, method: Method, mesh_size: f64) {
     let cmp = solve_all(scene, &s, &NoProgress).unwrap_or_else(|e| panic!("{name} {}: {e}", method.name()));
     let exact = 2.0 * std::f64::consts::PI;
     let free = free_elements(&cmp.solved, 0.75 * mesh_size);
-    assert!(free.len() * 4 > cmp.solved.mesh.len(), "{name}: only {} of {} elements free", free.len(), cmp.solved.mesh.len());
+    assert!(free.len() * 20 > cmp.solved.mesh.len(), "{name}: only {} of {} elements free", free.len(), cmp.solved.mesh.len());
     let g = &cmp.solved.ff_stats.as_ref().unwrap().guard;
     eprintln!(
         "{name} {}: {} elements ({} free), rows corrected {} (raw max {:.4}), {:.1} s",
