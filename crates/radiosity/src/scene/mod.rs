@@ -91,9 +91,10 @@ pub fn read_input(path: &Path) -> std::io::Result<Vec<u8>> {
     Ok(buf)
 }
 
-/// [`read_input`] as an [`Error`] naming the file.
+/// [`read_input`] as an [`Error`] naming the file (an input error: the reason is said once,
+/// not again as a source).
 pub(crate) fn read_input_file(path: &Path) -> Result<Vec<u8>> {
-    read_input(path).map_err(|e| Error::io(path, e))
+    read_input(path).map_err(|e| Error::input(Location::file(path), e.to_string()))
 }
 
 /// [`read_input_file`] as text (lossy UTF-8: OBJ files in the wild have Latin-1 comments).

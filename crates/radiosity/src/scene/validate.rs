@@ -201,7 +201,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             out.push(Polygon { vertices: v, normal, area, material: p.material, object: p.object, back_side: false, two_sided: two });
         }
         if out.len() == before {
-            tiny.add(&p.loc, "too small");
+            tiny.add(&p.loc, "too small for the scene's size");
             if emits {
                 lost_emitters.add(&p.loc, "too small");
             }
@@ -221,6 +221,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
         let mut why: Vec<String> = Vec::new();
         degenerate.describe(&mut why, "degenerate");
         crossing.describe(&mut why, "self-intersecting");
+        // (A reason equal to the heading is not repeated after the location.)
         tiny.describe(&mut why, "too small for the scene's size");
         let msg = if polygons.is_empty() {
             "the scene has no usable polygons: it has no polygons at all".to_string()
