@@ -176,6 +176,10 @@ fn scene_that_is_dev_zero_a_fifo_or_a_directory_is_refused() {
     std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
     let t = std::time::Instant::now();
     fails(&zero, &format!("{}: is not a regular file", zero.display()));
+    let fifo = tmp("fifo.obj");
+    let _ = std::fs::remove_file(&fifo);
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    fails(&fifo, &format!("{}: is not a regular file", fifo.display()));
     let dir = tmp("dir.obj");
     std::fs::create_dir_all(&dir).unwrap();
     fails(&dir, &format!("{}: is a directory", dir.display()));
