@@ -56,6 +56,9 @@ pub struct SolveFlags {
     /// Treat every surface as two-sided.
     #[arg(long)]
     pub two_sided: bool,
+    /// Refuse a reflectance ≥ 1 (e.g. glTF's default white) instead of lowering it to 0.95.
+    #[arg(long)]
+    pub strict: bool,
     #[command(flatten)]
     pub adaptive: AdaptiveFlags,
     /// Seed for every random choice (results do not depend on --threads).
@@ -125,15 +128,18 @@ impl SolveFlags {
         init_threads(self.threads)
     }
 
-    /// Loads and validates the scene, printing its warnings.
+    /// Loads and validates the scene, printing its warnings; a scene that emits no light
+    /// is an error (render and solve would give black).
     pub fn load_scene(&self) -> Result<(Scene, f64)> {
         let t = Instant::now();
         let mut desc = scene::load(&self.scene)?;
         desc.two_sided |= self.two_sided;
+        desc.strict = self.strict;
         let scene = Scene::from_desc(desc)?;
         for w in &scene.warnings {
             eprintln!("warning: {w}");
         }
+        scene.check_emits()?;
         Ok((scene, t.elapsed().as_secs_f64()))
     }
 }

@@ -192,7 +192,12 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             if let Some(f) = a.fov {
                 cam.vfov_deg = f;
             }
-            cam.validate().map_err(|m| anyhow::anyhow!("camera: {m}"))?;
+            let from = if a.eye.is_some() || a.look_at.is_some() || a.up.is_some() || a.fov.is_some() {
+                "--eye/--look-at/--up/--fov"
+            } else {
+                "camera"
+            };
+            cam.validate().map_err(|m| anyhow::anyhow!("{from}: {m}"))?;
             if framed {
                 cam = default_camera_inside(&scene, cam, a.width, a.height, a.fov, a.solve.quiet);
             }

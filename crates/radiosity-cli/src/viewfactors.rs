@@ -56,6 +56,9 @@ pub struct ViewfactorsArgs {
     /// Treat every surface as two-sided (each side gets its own row).
     #[arg(long)]
     pub two_sided: bool,
+    /// Refuse a reflectance ≥ 1 (e.g. glTF's default white) instead of lowering it to 0.95.
+    #[arg(long)]
+    pub strict: bool,
     /// Point-sampled: visibility rays per receiver point (n × n).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub visibility_samples: usize,
@@ -125,6 +128,7 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
         (scene::load(&a.scene)?, None)
     };
     desc.two_sided |= a.two_sided;
+    desc.strict = a.strict;
     let scene = Scene::from_desc(desc)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
@@ -293,8 +297,9 @@ fn parse_size(s: &str) -> Result<u64> {
 /// Largest absolute difference from a reference matrix, matched by names when all the
 /// reference's names are ours, else by position.
 fn compare(path: &Path, names: &[String], m: &radiosity::transport::DenseMatrix) -> Result<Value> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let v: Value = serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+    // Regular files only, with the library's size cap (not /dev/zero until memory runs out).
+    let bytes = radiosity::scene::read_input(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let v: Value = serde_json::from_slice(&bytes).with_context(|| format!("{}: not JSON", path.display()))?;
     let rnames: Vec<String> = v
         .get("names")
         .or_else(|| v.get("faces"))

@@ -72,7 +72,6 @@ fn obj_materials_missing_or_unphysical() {
     fails_at("nomtl.obj", "mtllib nowhere.mtl\nv 0 0 0\n", "nomtl.obj", 1);
     fails_at("usemtl.obj", "mtllib good.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl chrome\nf 1 2 3\n", "usemtl.obj", 5);
     for (name, mtl, line) in [
-        ("kd1.mtl", "newmtl a\nKd 1 0.5 0.5\n", 2),
         ("kdnan.mtl", "newmtl a\nKd nan\n", 2),
         ("kdneg.mtl", "# c\nnewmtl a\nKd -0.1 0.5 0.5\n", 3),
         ("keneg.mtl", "newmtl a\nKd 0.5 0.5 0.5\nKe 1 -1 1\n", 3),
@@ -251,4 +250,239 @@ proptest! {
     fn camera_json_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..200)) {
         let _ = Camera::from_json_str(&String::from_utf8_lossy(&bytes), Path::new("c.json"));
     }
+}
+
+// ---------------------------------------------------------------- hostile-input audit
+
+/// A symlink `name` → `/dev/zero` in the test folder (an endless, non-regular file).
+fn dev_zero(name: &str) -> PathBuf {
+    let p = tmp(name);
+    let _ = std::fs::remove_file(&p);
+    std::os::unix::fs::symlink("/dev/zero", &p).unwrap();
+    p
+}
+
+fn load_err(p: &Path) -> String {
+    match scene::load(p.to_str().unwrap()).and_then(Scene::from_desc) {
+        Ok(_) => panic!("{} loaded but should not", p.display()),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn inputs_that_are_not_regular_files_are_refused_before_reading() {
+    let t = std::time::Instant::now();
+    // As the scene.
+    let e = load_err(&dev_zero("zero.obj"));
+    assert!(e.starts_with(&format!("{}: is not a regular file", tmp("zero.obj").display())), "{e}");
+    let fifo = tmp("fifo.obj");
+    let _ = std::fs::remove_file(&fifo);
+    assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let e = load_err(&fifo);
+    assert!(e.contains("fifo.obj: is not a regular file"), "{e}");
+    let dir = tmp("scene-dir.obj");
+    std::fs::create_dir_all(&dir).unwrap();
+    let e = load_err(&dir);
+    assert!(e.starts_with(&format!("{}: is a directory", dir.display())), "{e}");
+    let e = load_err(&tmp(""));
+    assert!(e.contains("is a directory"), "{e}");
+    // As an OBJ mtllib: the error names the OBJ line and the library.
+    dev_zero("zero.mtl");
+    let e = load_err(&write("uses-zero.obj", "mtllib zero.mtl\nv 0 0 0\n"));
+    assert!(e.starts_with(&format!("{}:1:", tmp("uses-zero.obj").display())) && e.contains("zero.mtl") && e.contains("is not a regular file"), "{e}");
+    std::fs::create_dir_all(tmp("dir.mtl")).unwrap();
+    let e = load_err(&write("uses-dir.obj", "mtllib dir.mtl\nv 0 0 0\n"));
+    assert!(e.contains("uses-dir.obj:1:") && e.contains("is a directory"), "{e}");
+    // As a TOML mesh and a TOML camera file.
+    let e = load_err(&write("zero-mesh.toml", "# m\nmesh = \"zero.obj\"\n"));
+    assert!(e.starts_with(&format!("{}:2:", tmp("zero-mesh.toml").display())) && e.contains("is not a regular file"), "{e}");
+    let e = load_err(&write("dir-mesh.toml", "mesh = \"scene-dir.obj\"\n"));
+    assert!(e.contains("dir-mesh.toml:1:") && e.contains("is a directory"), "{e}");
+    dev_zero("zero.json");
+    let e = load_err(&write("zero-cam.toml", "mesh = \"builtin:cornell\"\ncamera = \"zero.json\"\n"));
+    assert!(e.contains("zero-cam.toml:2:") && e.contains("zero.json") && e.contains("is not a regular file"), "{e}");
+    // As a .vs3 scene, and camera / views JSON.
+    let e = load_err(&dev_zero("zero.vs3"));
+    assert!(e.contains("zero.vs3: is not a regular file"), "{e}");
+    let e = Camera::load_json(&tmp("zero.json")).unwrap_err().to_string();
+    assert!(e.contains("zero.json: is not a regular file"), "{e}");
+    let e = Camera::load_views(&tmp("zero.json")).unwrap_err().to_string();
+    assert!(e.contains("zero.json: is not a regular file"), "{e}");
+    let e = Camera::load_json(&dir).unwrap_err().to_string();
+    assert!(e.contains("is a directory"), "{e}");
+    assert!(t.elapsed().as_secs() < 10, "took {:?}", t.elapsed());
+}
+
+/// An OBJ with one face: a regular `n`-gon (convex) or an `n`-pointed star (concave).
+fn ngon_obj(n: usize, star: bool) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::from("mtllib good.mtl\nusemtl grey\n");
+    for i in 0..n {
+        let a = std::f64::consts::TAU * i as f64 / n as f64;
+        let r = if star && i % 2 == 1 { 0.5 } else { 1.0 };
+        writeln!(s, "v {} {} 0", r * a.cos(), r * a.sin()).unwrap();
+    }
+    s.push_str("f");
+    for i in 1..=n {
+        write!(s, " {i}").unwrap();
+    }
+    s.push('\n');
+    s
+}
+
+#[test]
+fn polygon_with_500000_vertices_is_refused_in_seconds_naming_the_line() {
+    let t = std::time::Instant::now();
+    let n = 500_000;
+    let e = load("ngon500k.obj", &ngon_obj(n, false)).unwrap_err().to_string();
+    let want = format!("{}:{}:", tmp("ngon500k.obj").display(), n + 3);
+    assert!(e.starts_with(&want), "{e}");
+    assert!(e.contains("500000 vertices") && e.contains(&format!("at most {}", scene::MAX_POLYGON_VERTICES)), "{e}");
+    assert!(t.elapsed().as_secs_f64() < 10.0, "took {:?}", t.elapsed());
+    // Just below the cap: a convex polygon and a concave star validate quickly, area kept.
+    let m = scene::MAX_POLYGON_VERTICES;
+    let t = std::time::Instant::now();
+    let s = load("ngon-max.obj", &ngon_obj(m, false)).unwrap();
+    let exact = 0.5 * m as f64 * (std::f64::consts::TAU / m as f64).sin();
+    assert_eq!(s.polygons.len(), 1);
+    assert!((s.total_area() - exact).abs() < 1e-9, "{} vs {exact}", s.total_area());
+    let s = load("star-max.obj", &ngon_obj(m, true)).unwrap();
+    // Star: m triangles (centre, outer, inner) of area ½·1·0.5·sin(2π/m).
+    let exact = m as f64 * 0.5 * 0.5 * (std::f64::consts::TAU / m as f64).sin();
+    assert_eq!(s.polygons.len(), m - 2);
+    assert!((s.total_area() - exact).abs() < 1e-9, "{} vs {exact}", s.total_area());
+    assert!(t.elapsed().as_secs_f64() < 10.0, "took {:?}", t.elapsed());
+}
+
+#[test]
+fn huge_emission_or_coordinates_are_refused_naming_the_line() {
+    write("huge-ke.mtl", "newmtl a\nKd 0.5 0.5 0.5\nKe 1e308 1e308 1e308\n");
+    let obj = "mtllib huge-ke.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n";
+    let e = fails_at("huge-ke.obj", obj, "huge-ke.mtl", 3);
+    assert!(e.contains("above 1e30"), "{e}");
+    // Geometry at 1e150: the vertex line.
+    let e = fails_at("huge-v.obj", "v 0 0 0\nv 1e150 0 0\nv 0 1e150 0\nf 1 2 3\n", "huge-v.obj", 2);
+    assert!(e.contains("above 1e30"), "{e}");
+    // Through validation (any format): emission and coordinates.
+    let tri = vec![glam::DVec3::ZERO, glam::DVec3::X * 1e31, glam::DVec3::Y];
+    let mut d = scene::SceneDesc {
+        name: "t".into(),
+        materials: vec![scene::MaterialDesc::diffuse("m", radiosity::Rgb::splat(0.5))],
+        objects: vec![scene::ObjectDesc { name: "o".into(), loc: None }],
+        polygons: vec![scene::PolygonDesc { vertices: tri, material: 0, object: 0, loc: Some(radiosity::Location::line("t.obj", 4)) }],
+        ..Default::default()
+    };
+    let e = Scene::from_desc(d.clone()).unwrap_err().to_string();
+    assert!(e.starts_with("t.obj:4:") && e.contains("above 1e30"), "{e}");
+    d.polygons[0].vertices[1] = glam::DVec3::X;
+    d.materials[0].emission = radiosity::Rgb::new(0.0, 2e30, 0.0);
+    d.materials[0].loc = Some(radiosity::Location::line("t.mtl", 7));
+    let e = Scene::from_desc(d.clone()).unwrap_err().to_string();
+    assert!(e.starts_with("t.mtl:7:") && e.contains("above 1e30"), "{e}");
+    // At the caps the numbers stay finite: exitance × area.
+    d.materials[0].emission = radiosity::Rgb::splat(scene::MAX_EMISSION);
+    d.polygons[0].vertices = vec![glam::DVec3::splat(-1e30), glam::DVec3::new(1e30, -1e30, 0.0), glam::DVec3::new(-1e30, 1e30, 0.0)];
+    let s = Scene::from_desc(d).unwrap();
+    let p = &s.polygons[0];
+    assert!((s.materials[0].exitance().max_element() * p.area).is_finite() && s.diagonal().powi(2).is_finite());
+}
+
+#[test]
+fn cr_only_line_endings_load_like_lf_and_lines_are_counted() {
+    let mtl_lf = "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 10 10 10\n";
+    let obj_lf = "mtllib MTL\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\no wall\nusemtl grey\nf 1 2 3 4\no lamp\nusemtl lamp\nf 1 2 3\n";
+    write("lf.mtl", mtl_lf);
+    write("cr.mtl", mtl_lf.replace('\n', "\r"));
+    let lf = Scene::from_desc(scene::load(write("lf.obj", obj_lf.replace("MTL", "lf.mtl")).to_str().unwrap()).unwrap()).unwrap();
+    let cr_text = obj_lf.replace("MTL", "cr.mtl").replace('\n', "\r");
+    let cr = Scene::from_desc(scene::load(write("cr.obj", &cr_text).to_str().unwrap()).unwrap()).unwrap();
+    assert_eq!(cr.polygons, lf.polygons);
+    assert_eq!(cr.materials, lf.materials);
+    assert_eq!(cr.objects, lf.objects);
+    // Mixed endings and errors: the line number is right.
+    let e = load("cr-bad.obj", "v 0 0 0\rv 1 0 0\r\nv 0 x 0\rf 1 2 3\r").unwrap_err().to_string();
+    assert!(e.starts_with(&format!("{}:3:", tmp("cr-bad.obj").display())), "{e}");
+    write("cr-bad.mtl", "newmtl a\rKd 0.5 0.5 0.5\rKe -1 0 0\r");
+    let e = load("cr-badmtl.obj", "mtllib cr-bad.mtl\rv 0 0 0\r").unwrap_err().to_string();
+    assert!(e.starts_with(&format!("{}:3:", tmp("cr-bad.mtl").display())), "{e}");
+    // .vs3 too.
+    let vs3 = "T t\rF 3\rV 1 0 0 0\rV 2 1 0 0\rV 3 0 1 0\rV 4 x 0 0\r";
+    let e = radiosity::scene::vs3::parse_vs3(vs3, Path::new("cr.vs3")).unwrap_err().to_string();
+    assert!(e.starts_with("cr.vs3:6:"), "{e}");
+}
+
+#[test]
+fn no_usable_polygons_names_the_file_and_why() {
+    let text = format!("{QUAD}f 1 2 3 4\n").replace("f 1 2 3 4", "f 1 1 2\nf 1 2 2\nf 3 3 3 3");
+    let e = load("alldegenerate2.obj", &text).unwrap_err().to_string();
+    let p = tmp("alldegenerate2.obj").display().to_string();
+    assert!(e.starts_with(&format!("{p}: the scene has no usable polygons: all 3 polygons were skipped: 3 degenerate (first at {p}:7: ")), "{e}");
+    // A file with no faces at all.
+    let e = load("nofaces.obj", "v 0 0 0\nv 1 0 0\n").unwrap_err().to_string();
+    assert!(e.starts_with(&format!("{}: the file contains no faces", tmp("nofaces.obj").display())), "{e}");
+}
+
+#[test]
+fn reflectance_of_one_is_lowered_with_one_warning_or_refused_when_strict() {
+    write("white.mtl", "newmtl white\nKd 1 1 1\nnewmtl whiter\nKd 1.5 0.5 0.5\nnewmtl lamp\nKe 1 1 1\n");
+    let obj = "mtllib white.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl white\nf 1 2 3\nusemtl whiter\nf 1 3 2\nusemtl lamp\nf 1 2 3\n";
+    let p = write("white.obj", obj);
+    let s = Scene::from_desc(scene::load(p.to_str().unwrap()).unwrap()).unwrap();
+    assert_eq!(s.materials[0].reflectance, radiosity::Rgb::splat(scene::MAX_REFLECTANCE));
+    assert_eq!(s.materials[1].reflectance, radiosity::Rgb::new(scene::MAX_REFLECTANCE, 0.5, 0.5));
+    let w: Vec<String> = s.warnings.iter().filter(|w| w.msg.contains("lowered")).map(|w| w.to_string()).collect();
+    assert_eq!(w.len(), 1, "{w:?}");
+    let m = tmp("white.mtl").display().to_string();
+    assert!(w[0].contains(&format!("'white' ({m}:2)")) && w[0].contains(&format!("'whiter' ({m}:4)")) && w[0].contains("2 material"), "{w:?}");
+    let mut d = scene::load(p.to_str().unwrap()).unwrap();
+    d.strict = true;
+    let e = Scene::from_desc(d).unwrap_err().to_string();
+    assert!(e.starts_with(&format!("{m}:2:")) && e.contains("'white'") && e.contains("[0, 1)"), "{e}");
+    // Negative and NaN are still refused.
+    write("kdneg2.mtl", "newmtl a\nKd -0.5 0.5 0.5\n");
+    assert!(fails_at("kdneg2.obj", "mtllib kdneg2.mtl\n", "kdneg2.mtl", 2).contains("non-negative"));
+    write("kdnan2.mtl", "newmtl a\nKd 0.5 nan 0.5\n");
+    assert!(fails_at("kdnan2.obj", "mtllib kdnan2.mtl\n", "kdnan2.mtl", 2).contains("finite"));
+}
+
+#[test]
+fn scene_without_light_is_an_error_saying_what_was_skipped() {
+    // No emitter at all.
+    let s = load("dark.obj", &format!("{QUAD}f 1 2 3 4\n")).unwrap();
+    let e = s.check_emits().unwrap_err().to_string();
+    assert!(e.starts_with(&format!("{}: no surface emits light: no material has a positive emission", tmp("dark.obj").display())), "{e}");
+    // Ke 0 everywhere.
+    write("ke0.mtl", "newmtl a\nKd 0.5 0.5 0.5\nKe 0 0 0\n");
+    let s = load("ke0.obj", "mtllib ke0.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n").unwrap();
+    assert!(s.check_emits().unwrap_err().to_string().contains("no material has a positive emission"));
+    // The only light skipped as degenerate: named with its line.
+    let s = load("lostlamp.obj", &format!("{QUAD}f 1 2 3 4\nusemtl lamp\nf 1 2 2\n")).unwrap();
+    let e = s.check_emits().unwrap_err().to_string();
+    let p = tmp("lostlamp.obj").display().to_string();
+    assert!(e.contains(&format!("1 emitting polygon was skipped (first at {p}:9: degenerate)")), "{e}");
+    // A scene with light passes.
+    let s = load("lit.obj", &format!("{QUAD}f 1 2 3 4\nusemtl lamp\nf 1 2 3\n")).unwrap();
+    s.check_emits().unwrap();
+}
+
+#[test]
+fn cameras_at_extreme_or_degenerate_values_are_refused_naming_the_file() {
+    let p = |n: &str| tmp(n).display().to_string();
+    let good = "{\n  \"position\": [0, 0, -5],\n  \"look_at\": [0, 0, 0],\n  \"up\": [0, 1, 0],\n  \"vfov_deg\": 40\n}\n";
+    for (name, text, line, why) in [
+        ("far.json", good.replace("[0, 0, -5]", "[0, 0, 1e308]"), 2, "above 1e30"),
+        ("farlook.json", good.replace("[0, 0, 0]", "[1e31, 0, 0]"), 3, "above 1e30"),
+        ("hugeup.json", good.replace("[0, 1, 0]", "[0, 1e300, 0]"), 4, "above 1e30"),
+        ("zeroup.json", good.replace("[0, 1, 0]", "[0, 0, 0]"), 4, "parallel"),
+        ("fov-neg.json", good.replace("40", "-3"), 5, "between 0 and 180"),
+        ("fov-big.json", good.replace("40", "200"), 5, "between 0 and 180"),
+        ("near.json", good.replace("[0, 0, 0]", "[0, 0, -4.999999999999999]").replace("[0, 0, -5]", "[0, 0, -5.0]"), 3, "coincide"),
+    ] {
+        let e = camera_err(name, &text);
+        assert!(e.starts_with(&format!("{}:{line}:", p(name))) && e.contains(why), "{name}: {e}");
+    }
+    // View lists: the file and the view.
+    let views = write("far-views.json", "[{\"name\": \"a\", \"position\": [0, 0, -5], \"look_at\": [0, 0, 0], \"up\": [0, 1, 0], \"vfov_deg\": 40},\n {\"name\": \"b\", \"position\": [0, 0, 1e308], \"look_at\": [0, 0, 0], \"up\": [0, 1, 0], \"vfov_deg\": 40}]");
+    let e = Camera::load_views(&views).unwrap_err().to_string();
+    assert!(e.starts_with(&p("far-views.json")) && e.contains("view 1 ('b')") && e.contains("above 1e30"), "{e}");
 }

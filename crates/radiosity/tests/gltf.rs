@@ -377,7 +377,7 @@ fn missing_base_color_gets_default_with_warning() {
 }
 
 #[test]
-fn base_color_of_one_is_an_error_naming_file_line_and_material() {
+fn base_color_of_one_is_capped_with_one_warning_or_refused_when_strict() {
     let (mut j, bin) = doc(&TRI, None);
     j["materials"] = json!([
         {"name": "grey", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1]}},
@@ -385,7 +385,16 @@ fn base_color_of_one_is_an_error_naming_file_line_and_material() {
     ]);
     j["meshes"][0]["primitives"][0]["material"] = json!(1);
     let p = write_embedded("white.gltf", j.clone(), &bin);
-    let e = err_of(&p);
+    // Default: lowered to MAX_REFLECTANCE, one warning naming the material and its line.
+    let s = Scene::from_desc(load(&p).unwrap()).unwrap();
+    assert_eq!(s.materials[0].reflectance, Rgb::splat(scene::MAX_REFLECTANCE));
+    let capped: Vec<_> = s.warnings.iter().filter(|w| w.msg.contains("lowered to")).collect();
+    assert_eq!(capped.len(), 1, "{:?}", s.warnings);
+    assert!(capped[0].msg.contains("'white'") && capped[0].msg.contains(&format!("{}:", p.display())), "{}", capped[0]);
+    // Strict: an error at the material's line.
+    let mut d = load(&p).unwrap();
+    d.strict = true;
+    let e = Scene::from_desc(d).unwrap_err().to_string();
     let text = std::fs::read_to_string(&p).unwrap();
     let line = text.lines().position(|l| l.contains("\"white\"")).unwrap() + 1;
     // The element starts at its `{`, a line or two above its name.
@@ -393,10 +402,94 @@ fn base_color_of_one_is_an_error_naming_file_line_and_material() {
     assert!(e.starts_with(&prefix), "{e}");
     let l: usize = e[prefix.len()..].split(':').next().unwrap().parse().unwrap();
     assert!(l <= line && line - l <= 3, "error at line {l}, material name at {line}: {e}");
-    assert!(e.contains("'white'") && e.contains("baseColorFactor"), "{e}");
+    assert!(e.contains("'white'") && e.contains("[0, 1)"), "{e}");
     // GLB: names file and material.
-    let e = err_of(&write_glb("white.glb", &j, &bin));
+    let mut d = load(&write_glb("white.glb", &j, &bin)).unwrap();
+    d.strict = true;
+    let e = Scene::from_desc(d).unwrap_err().to_string();
     assert!(e.contains("white.glb") && e.contains("'white'"), "{e}");
+    // Negative stays an error at load.
+    j["materials"][1]["pbrMetallicRoughness"]["baseColorFactor"] = json!([-0.1, 0.5, 0.5, 1]);
+    let e = err_of(&write_embedded("negbase.gltf", j, &bin));
+    assert!(e.contains("negbase.gltf:") && e.contains("'white'") && e.contains("negative"), "{e}");
+}
+
+#[test]
+fn position_accessor_must_be_float_vec3() {
+    // UNSIGNED_INT positions (the audit's garbage-in case): refused, naming the accessor's
+    // line, the mesh and primitive, and the rule.
+    let u: Vec<u8> = [[0u32, 0, 1], [1, 0, 1], [0, 1, 1]].iter().flatten().flat_map(|c| c.to_le_bytes()).collect();
+    let (mut j, _) = doc(&TRI, None);
+    j["accessors"][0]["componentType"] = json!(5125);
+    let p = write_embedded("uint-pos.gltf", j.clone(), &u);
+    let e = err_of(&p);
+    let text = std::fs::read_to_string(&p).unwrap();
+    let acc_line = text.lines().position(|l| l.contains("\"accessors\"")).unwrap() + 1;
+    assert!(e.starts_with(&format!("{}:{}:", p.display(), acc_line + 1)), "{e}");
+    assert!(e.contains("mesh 'm' (meshes[0]) primitive 0") && e.contains("U32") && e.contains("FLOAT"), "{e}");
+    // Even with KHR_mesh_quantization, UNSIGNED_INT is not allowed.
+    j["extensionsUsed"] = json!(["KHR_mesh_quantization"]);
+    let e = err_of(&write_embedded("uint-pos-q.gltf", j, &u));
+    assert!(e.contains("U32") && e.contains("KHR_mesh_quantization"), "{e}");
+    // UNSIGNED_SHORT without the extension: refused; normalized FLOAT: refused.
+    let (mut j, bin) = doc(&TRI, None);
+    j["accessors"][0]["componentType"] = json!(5123);
+    let e = err_of(&write_embedded("u16-pos.gltf", j, &bin));
+    assert!(e.contains("U16") && e.contains("KHR_mesh_quantization"), "{e}");
+    let (mut j, bin) = doc(&TRI, None);
+    j["accessors"][0]["normalized"] = json!(true);
+    let e = err_of(&write_embedded("normfloat-pos.gltf", j, &bin));
+    assert!(e.contains("normalized F32"), "{e}");
+    // Index accessors: FLOAT, signed or normalized indices are refused; out of range too.
+    for (name, ct, norm, want) in [("f32-idx.gltf", 5126, false, "F32"), ("i16-idx.gltf", 5122, false, "I16"), ("norm-idx.gltf", 5123, true, "normalized")] {
+        let (mut j, bin) = doc(&TRI, Some(&[0, 1, 2, 0, 0, 0]));
+        j["accessors"][1]["componentType"] = json!(ct);
+        j["accessors"][1]["normalized"] = json!(norm);
+        if ct == 5126 {
+            j["accessors"][1]["count"] = json!(3);
+        }
+        let e = err_of(&write_embedded(name, j, &bin));
+        assert!(e.contains(name) && e.contains("index accessor 1") && e.contains(want), "{name}: {e}");
+    }
+    let (j, bin) = doc(&TRI, Some(&[0, 1, 3]));
+    let e = err_of(&write_embedded("idx-range.gltf", j, &bin));
+    assert!(e.contains("vertex index 3 is out of range"), "{e}");
+}
+
+#[test]
+fn punctual_lights_are_counted_and_a_scene_without_emitters_says_so() {
+    let (mut j, bin) = doc(&TRI, None);
+    j["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+    j["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "point"}, {"type": "spot", "spot": {}}]}});
+    let p = write_embedded("punctual.gltf", j, &bin);
+    let d = load(&p).unwrap();
+    assert_eq!(d.ignored_lights.len(), 1, "{:?}", d.ignored_lights);
+    assert!(d.warnings.iter().any(|w| w.msg.contains("2 KHR_lights_punctual lights are ignored")), "{:?}", d.warnings);
+    let s = Scene::from_desc(d).unwrap();
+    let e = s.check_emits().unwrap_err().to_string();
+    assert!(e.starts_with(&format!("{}: no surface emits light", p.display())), "{e}");
+    assert!(e.contains("2 KHR_lights_punctual lights are ignored (not supported yet"), "{e}");
+}
+
+#[test]
+fn external_buffer_that_is_not_a_regular_file_is_refused() {
+    let (mut j, bin) = doc(&TRI, None);
+    let dev = tmp("zero.bin");
+    let _ = std::fs::remove_file(&dev);
+    std::os::unix::fs::symlink("/dev/zero", &dev).unwrap();
+    j["buffers"][0]["uri"] = json!("zero.bin");
+    let e = err_of(&write_embedded("zero-buffer.gltf", j.clone(), &bin));
+    assert!(e.contains("zero-buffer.gltf:") && e.contains("zero.bin") && e.contains("is not a regular file"), "{e}");
+    std::fs::create_dir_all(tmp("dir.bin")).unwrap();
+    j["buffers"][0]["uri"] = json!("dir.bin");
+    let e = err_of(&write_embedded("dir-buffer.gltf", j, &bin));
+    assert!(e.contains("dir.bin") && e.contains("is a directory"), "{e}");
+    // The glTF itself.
+    let dev = tmp("zero.gltf");
+    let _ = std::fs::remove_file(&dev);
+    std::os::unix::fs::symlink("/dev/zero", &dev).unwrap();
+    let e = err_of(&dev);
+    assert!(e.contains("zero.gltf") && e.contains("is not a regular file"), "{e}");
 }
 
 #[test]
@@ -418,8 +511,13 @@ fn negative_or_infinite_emission_is_rejected_by_validation() {
     let e = Scene::from_desc(d).unwrap_err().to_string();
     assert!(e.contains("negemit.gltf:") && e.contains("non-negative"), "{e}");
     j["materials"][0]["emissiveFactor"] = json!([1e39, 0.0, 0.0]); // f32 overflow → inf
-    let d = load(&write_embedded("infemit.gltf", j, &bin)).unwrap();
+    let d = load(&write_embedded("infemit.gltf", j.clone(), &bin)).unwrap();
     assert!(Scene::from_desc(d).is_err());
+    // Finite but above MAX_EMISSION (exitance × area would overflow downstream).
+    j["materials"][0]["emissiveFactor"] = json!([1e35, 0.0, 0.0]);
+    let d = load(&write_embedded("hugeemit.gltf", j, &bin)).unwrap();
+    let e = Scene::from_desc(d).unwrap_err().to_string();
+    assert!(e.contains("hugeemit.gltf:") && e.contains("above 1e30"), "{e}");
 }
 
 // ---------------------------------------------------------------- camera, containers, buffers

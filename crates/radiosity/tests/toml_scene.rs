@@ -113,18 +113,25 @@ fn white_gltf() -> PathBuf {
 }
 
 #[test]
-fn gltf_base_color_of_one_needs_an_override() {
+fn gltf_base_color_of_one_is_lowered_or_overridden() {
     let g = white_gltf();
-    // Without an override: the glTF error (naming the glTF file and the material).
-    let e = err("white-plain.toml", "mesh = \"white.gltf\"\n");
-    assert!(e.starts_with(&format!("{}:", g.display())) && e.contains("'paint'") && e.contains("baseColorFactor"), "{e}");
-    // Overriding the emission only is not enough.
-    let e = err("white-emit.toml", "mesh = \"white.gltf\"\n[materials.paint]\nemission = [1, 1, 1]\n");
-    assert!(e.contains("baseColorFactor"), "{e}");
-    // Overriding the reflectance is.
+    // Without an override: lowered to MAX_REFLECTANCE with a warning naming the glTF file
+    // and the material; strict mode refuses it there.
+    let p = write("white-plain.toml", "mesh = \"white.gltf\"\n");
+    let s = Scene::from_desc(load_toml(&p).unwrap()).unwrap();
+    assert_eq!(s.materials[0].reflectance, Rgb::splat(scene::MAX_REFLECTANCE));
+    let w = s.warnings.iter().find(|w| w.msg.contains("lowered")).expect("a warning");
+    assert!(w.msg.contains(&format!("'paint' ({}:", g.display())), "{w}");
+    let mut d = load_toml(&p).unwrap();
+    d.strict = true;
+    let e = Scene::from_desc(d).unwrap_err().to_string();
+    assert!(e.starts_with(&format!("{}:", g.display())) && e.contains("'paint'"), "{e}");
+    // Overriding the reflectance sets the value wanted (no warning).
     let d = load_toml(&write("white-fixed.toml", "mesh = \"white.gltf\"\n[materials.paint]\nreflectance = [0.7, 0.7, 0.7]\n"))
         .unwrap();
     assert_eq!(d.materials[0].reflectance, Rgb::splat(0.7));
+    let s = Scene::from_desc(d).unwrap();
+    assert!(!s.warnings.iter().any(|w| w.msg.contains("lowered")), "{:?}", s.warnings);
 }
 
 #[test]
@@ -211,12 +218,27 @@ fn missing_and_unknown_meshes_name_the_toml_line() {
 #[test]
 fn non_physical_values_are_rejected_with_their_line() {
     let base = "mesh = \"builtin:cornell\"\n[materials.light]\n";
-    for (i, bad) in ["emission = [1, nan, 1]", "emission = [inf, 1, 1]", "emission = [-1, 0, 0]", "reflectance = [1, 0, 0]", "reflectance = [0.5, -0.1, 0]", "reflectance = [0.5, nan, 0]"]
+    for (i, bad) in ["emission = [1, nan, 1]", "emission = [inf, 1, 1]", "emission = [-1, 0, 0]", "emission = [1e31, 0, 0]", "reflectance = [0.5, -0.1, 0]", "reflectance = [0.5, nan, 0]"]
         .iter()
         .enumerate()
     {
+        if bad.contains("1e31") {
+            // Too much emission is found by validation, at the override's table.
+            let d = load_toml(&write(&format!("value{i}.toml"), &format!("{base}{bad}\n"))).unwrap();
+            let e = Scene::from_desc(d).unwrap_err().to_string();
+            assert!(e.starts_with(&format!("{}:2:", tmp(&format!("value{i}.toml")).display())) && e.contains("above 1e30"), "{e}");
+            continue;
+        }
         err_at(&format!("value{i}.toml"), &format!("{base}{bad}\n"), 3);
     }
+    // Reflectance 1: lowered with a warning, refused in strict mode at the override.
+    let p = write("refl1.toml", &format!("{base}reflectance = [1, 0, 0]\n"));
+    let s = Scene::from_desc(load_toml(&p).unwrap()).unwrap();
+    assert!(s.warnings.iter().any(|w| w.msg.contains("'light'") && w.msg.contains("lowered to 0.95")), "{:?}", s.warnings);
+    let mut d = load_toml(&p).unwrap();
+    d.strict = true;
+    let e = Scene::from_desc(d).unwrap_err().to_string();
+    assert!(e.starts_with(&format!("{}:2:", p.display())) && e.contains("'light'"), "{e}");
     let e = err_at("unknown-mat.toml", "mesh = \"builtin:cornell\"\n\n[materials.lamp]\nemission = [1, 1, 1]\n", 3);
     assert!(e.contains("lamp") && e.contains("green, light, red, white"), "{e}");
     // Camera values.

@@ -45,19 +45,24 @@ impl Camera {
 
     /// [`Camera::validate`], also naming the field at fault (for error locations).
     fn check(&self) -> std::result::Result<(), (&'static str, String)> {
+        let max = super::MAX_COORDINATE;
         for (field, v) in [("position", self.position), ("look_at", self.look_at), ("up", self.up)] {
             if !v.is_finite() {
                 return Err((field, format!("camera {field} must be finite numbers, got {:?}", v.to_array())));
+            }
+            if v.abs().max_element() > max {
+                return Err((field, format!("camera {field} {:?} has a coordinate of magnitude above {max:e}", v.to_array())));
             }
         }
         if !self.vfov_deg.is_finite() {
             return Err(("vfov_deg", "camera values must be finite numbers".into()));
         }
         let fwd = self.look_at - self.position;
-        if fwd.length() <= 0.0 {
+        let scale = self.position.abs().max_element().max(self.look_at.abs().max_element());
+        if fwd.length() <= 1e-12 * scale || fwd.length() == 0.0 {
             return Err(("look_at", "camera position and look_at coincide".into()));
         }
-        if fwd.normalize().cross(self.up).length() < 1e-9 {
+        if !(self.up.length() > 0.0) || fwd.normalize().cross(self.up.normalize()).length() < 1e-9 {
             return Err(("up", "camera up is parallel to the view direction (or zero)".into()));
         }
         if !(self.vfov_deg > 0.0 && self.vfov_deg < 180.0) {
@@ -97,14 +102,14 @@ impl Camera {
 
     /// Reads a camera JSON file.
     pub fn load_json(path: &Path) -> Result<Camera> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = super::read_input_text(path)?;
         Camera::from_json_str(&text, path)
     }
 
     /// Reads a list of views: a JSON array of cameras (the form above, each optionally with
     /// a `"name"`), or an object `{"views": [...]}`. Unnamed views are called `view<k>`.
     pub fn load_views(path: &Path) -> Result<Vec<(String, Camera)>> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = super::read_input_text(path)?;
         let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| Error::Input {
             loc: Location { file: path.into(), line: Some(e.line()), column: Some(e.column()) },
             msg: format!("invalid views JSON: {e}"),

@@ -16,8 +16,10 @@
 //! `baseColorFactor` RGB (linear, as glTF specifies), emitted radiance L_e =
 //! `emissiveFactor` × `KHR_materials_emissive_strength.emissiveStrength`; `doubleSided`
 //! gives a two-sided material. Only materials used by a drawn primitive are kept. A
-//! `baseColorFactor` channel outside [0, 1) is an error naming the file, the JSON line of
-//! the material (for `.gltf`) and the material. glTF's *default* `baseColorFactor` is 1.0,
+//! negative `baseColorFactor` channel is an error naming the file, the JSON line of the
+//! material (for `.gltf`) and the material; a channel ≥ 1 is lowered by validation to
+//! [`super::MAX_REFLECTANCE`] with one warning (refused in strict mode). glTF's *default*
+//! `baseColorFactor` is 1.0,
 //! which a radiosity solver cannot use (a surface that reflects everything never absorbs,
 //! and the solution diverges in a closed room): a material that omits it, and a primitive
 //! without a material, get reflectance [`DEFAULT_REFLECTANCE`] (0.8, Blender's default base
@@ -25,7 +27,8 @@
 //! (including `baseColorTexture` and `emissiveTexture`), normals and vertex colours are
 //! ignored: the solver needs one constant colour per material.
 //!
-//! **Not supported.** Points and lines (skipped with a warning: they have no area), skins
+//! **Not supported.** `KHR_lights_punctual` lights (counted in
+//! [`SceneDesc::ignored_lights`], with a warning), points and lines (skipped with a warning: they have no area), skins
 //! and morph targets (the rest pose is used, with a warning), orthographic cameras
 //! (ignored), URLs other than relative file paths and `data:` URIs, and required
 //! extensions that change geometry (Draco, meshopt, GPU instancing: an error).
@@ -82,23 +85,24 @@ pub fn load_gltf(path: &Path) -> Result<SceneDesc> {
 /// Reads a glTF file without rejecting out-of-range `baseColorFactor`s, so that a TOML
 /// scene file can override them first (see [`check_base_colors`]).
 pub(crate) fn read_gltf(path: &Path) -> Result<SceneDesc> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = super::read_input_file(path)?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    parse_gltf(&bytes, path, |rel| std::fs::read(dir.join(rel)))
+    parse_gltf(&bytes, path, |rel| super::read_input(&dir.join(rel)))
 }
 
-/// The glTF-specific check of reflectances: a `baseColorFactor` channel outside [0, 1) is
-/// an error naming the material and where it is defined.
+/// The glTF-specific check of reflectances: a negative or non-finite `baseColorFactor`
+/// channel is an error naming the material and where it is defined. (A channel ≥ 1, glTF's
+/// default white, is lowered to [`super::MAX_REFLECTANCE`] by validation, or refused there
+/// in strict mode.)
 pub(crate) fn check_base_colors(materials: &[MaterialDesc], file: &Path) -> Result<()> {
     for m in materials {
         let r = m.reflectance.to_array();
-        if r.iter().any(|c| !c.is_finite() || *c < 0.0 || *c >= 1.0) {
+        if r.iter().any(|c| !c.is_finite() || *c < 0.0) {
             return Err(Error::input(
                 m.loc.clone().unwrap_or_else(|| Location::file(file)),
                 format!(
-                    "material '{}': baseColorFactor RGB {:?} has a channel outside [0, 1); a diffuse \
-                     reflectance must be below 1 or light is never absorbed (lower it in the file, or \
-                     override it in a TOML scene file: [materials.\"{}\"] reflectance = [r, g, b])",
+                    "material '{}': baseColorFactor RGB {:?} has a negative or non-finite channel (lower it in \
+                     the file, or override it in a TOML scene file: [materials.\"{}\"] reflectance = [r, g, b])",
                     m.name, r, m.name
                 ),
             ));
@@ -453,6 +457,22 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             ));
         }
         desc.camera = camera;
+        let lights = self
+            .raw
+            .get("extensions")
+            .and_then(|x| x.get("KHR_lights_punctual"))
+            .and_then(|x| x.get("lights"))
+            .and_then(|l| l.as_array())
+            .map_or(0, Vec::len);
+        if lights > 0 {
+            let msg = format!(
+                "{lights} KHR_lights_punctual light{} {} ignored (not supported yet: only emissive surfaces give light)",
+                if lights == 1 { "" } else { "s" },
+                if lights == 1 { "is" } else { "are" }
+            );
+            self.warn(Location::file(self.file), msg.clone());
+            desc.ignored_lights.push(format!("{}: {msg}", self.file.display()));
+        }
         desc.warnings = std::mem::take(&mut self.warnings);
         Ok(desc)
     }
@@ -714,6 +734,33 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
     }
 
     fn read_positions(&mut self, ai: usize, what: &str) -> Result<Vec<DVec3>> {
+        let root = self.root;
+        if let Some(a) = root.accessors.get(ai) {
+            // glTF 2.0 §3.7.2.1: POSITION is FLOAT VEC3; KHR_mesh_quantization adds (normalized
+            // or not) BYTE, UNSIGNED_BYTE, SHORT and UNSIGNED_SHORT. UNSIGNED_INT never.
+            let quantized = root.extensions_used.iter().any(|e| e == "KHR_mesh_quantization")
+                || root.extensions_required.iter().any(|e| e == "KHR_mesh_quantization");
+            if let Checked::Valid(t) = a.component_type {
+                let ok = match t.0 {
+                    ComponentType::F32 => !a.normalized,
+                    ComponentType::U32 => false,
+                    _ => quantized,
+                };
+                if !ok {
+                    let norm = if a.normalized { "normalized " } else { "" };
+                    let why = if quantized || t.0 == ComponentType::F32 {
+                        "glTF allows FLOAT (not normalized) or, with KHR_mesh_quantization, [UNSIGNED_]BYTE or [UNSIGNED_]SHORT"
+                    } else {
+                        "glTF requires FLOAT VEC3 (integer positions need the KHR_mesh_quantization extension)"
+                    };
+                    return Err(self.err(
+                        "accessors",
+                        ai,
+                        format!("{what}: POSITION accessor {ai} has component type {norm}{:?}; {why}", t.0),
+                    ));
+                }
+            }
+        }
         let vals = self.read_accessor(ai, Type::Vec3, what, "POSITION")?;
         let label = format!("{what}: POSITION accessor {ai}");
         let mut out = Vec::with_capacity(vals.len() / 3);
@@ -730,6 +777,9 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
     fn read_indices(&mut self, ai: usize, what: &str) -> Result<Vec<usize>> {
         let root = self.root;
         if let Some(a) = root.accessors.get(ai) {
+            if a.normalized {
+                return Err(self.err("accessors", ai, format!("{what}: index accessor {ai} is normalized (indices must not be)")));
+            }
             if let Checked::Valid(t) = a.component_type {
                 if !matches!(t.0, ComponentType::U8 | ComponentType::U16 | ComponentType::U32) {
                     return Err(self.err(

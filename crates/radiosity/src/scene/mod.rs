@@ -3,8 +3,11 @@
 //! A scene file is read into a [`SceneDesc`] (plain description data: polygons as vertex
 //! lists, materials, named objects, an optional camera, each with the place in the file it
 //! came from). [`Scene::from_desc`] validates it into a [`Scene`]: non-physical values
-//! (reflectance outside [0,1), negative or non-finite emission, NaN coordinates) are errors
-//! naming file and line; degenerate polygons are skipped with a warning; non-planar polygons
+//! (negative or non-finite reflectance, negative, non-finite or huge emission — above
+//! [`MAX_EMISSION`] —, NaN coordinates or coordinates beyond [`MAX_COORDINATE`]) are errors
+//! naming file and line; a reflectance channel ≥ 1 (glTF's default white) is lowered to
+//! [`MAX_REFLECTANCE`] with one warning, or refused with [`SceneDesc::strict`];
+//! polygons with more than [`MAX_POLYGON_VERTICES`] vertices are refused; degenerate polygons are skipped with a warning; non-planar polygons
 //! are split into triangles the way path tracers do (v0,vi,vi+1); concave polygons are
 //! triangulated by ear clipping; two-sided materials get a back-facing copy of each polygon
 //! (radiosity is per side).
@@ -20,7 +23,8 @@ pub mod toml_file;
 mod validate;
 pub mod vs3;
 
-use std::path::Path;
+use std::io::Read as _;
+use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
@@ -28,12 +32,111 @@ pub use camera::Camera;
 
 use crate::{Error, Location, Result, Rgb, Warning};
 
+/// Largest input file read (scene, material library, buffer, camera): 4 GiB. Larger files,
+/// and anything that is not a regular file (a directory, a FIFO, `/dev/zero`), are refused
+/// before reading.
+pub const MAX_INPUT_BYTES: u64 = 4 << 30;
+
+/// Highest diffuse reflectance used: an input channel ≥ 1 (glTF's default `baseColorFactor`
+/// 1.0, an OBJ `Kd 1`) is lowered to this, with one warning, unless [`SceneDesc::strict`].
+pub const MAX_REFLECTANCE: f64 = 0.95;
+
+/// Largest emitted radiance per channel (`Ke`, `emissiveFactor` × strength): above it,
+/// exitance × area or the solution can overflow to infinity.
+pub const MAX_EMISSION: f64 = 1e30;
+
+/// Largest coordinate magnitude (vertices, cameras): beyond it areas and squared distances
+/// can overflow.
+pub const MAX_COORDINATE: f64 = 1e30;
+
+/// Most vertices one polygon may have (OBJ faces); a larger polygon is refused with its
+/// file and line (triangulating and meshing it would take minutes).
+pub const MAX_POLYGON_VERTICES: usize = 10_000;
+
+/// Reads an input file whole: only regular files (not a directory, FIFO or device such as
+/// `/dev/zero`) of at most [`MAX_INPUT_BYTES`]. The error's text says which check failed
+/// ("is a directory", "is not a regular file", "is … larger than …"); callers add the path.
+pub fn read_input(path: &Path) -> std::io::Result<Vec<u8>> {
+    use std::io::{Error as IoError, ErrorKind};
+    let meta = std::fs::metadata(path)?;
+    if meta.is_dir() {
+        return Err(IoError::new(ErrorKind::InvalidInput, "is a directory, not a file"));
+    }
+    if !meta.is_file() {
+        return Err(IoError::new(
+            ErrorKind::InvalidInput,
+            "is not a regular file (a device, FIFO or socket); only regular files are read",
+        ));
+    }
+    let too_big = |n: u64| {
+        IoError::new(
+            ErrorKind::InvalidInput,
+            format!(
+                "is {}, larger than the {} an input file may have",
+                crate::error::fmt_bytes(n),
+                crate::error::fmt_bytes(MAX_INPUT_BYTES)
+            ),
+        )
+    };
+    if meta.len() > MAX_INPUT_BYTES {
+        return Err(too_big(meta.len()));
+    }
+    let f = std::fs::File::open(path)?;
+    let mut buf = Vec::with_capacity(meta.len() as usize);
+    // take(): a file that grows while it is read still stops at the cap.
+    f.take(MAX_INPUT_BYTES + 1).read_to_end(&mut buf)?;
+    if buf.len() as u64 > MAX_INPUT_BYTES {
+        return Err(too_big(buf.len() as u64));
+    }
+    Ok(buf)
+}
+
+/// [`read_input`] as an [`Error`] naming the file (an input error: the reason is said once,
+/// not again as a source).
+pub(crate) fn read_input_file(path: &Path) -> Result<Vec<u8>> {
+    read_input(path).map_err(|e| Error::input(Location::file(path), e.to_string()))
+}
+
+/// [`read_input_file`] as text (lossy UTF-8: OBJ files in the wild have Latin-1 comments).
+pub(crate) fn read_input_text(path: &Path) -> Result<String> {
+    let bytes = read_input_file(path)?;
+    Ok(match String::from_utf8(bytes) {
+        Ok(s) => s,
+        Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
+    })
+}
+
+/// Lines ended by `\n`, `\r\n` or a lone `\r` (old Mac files), without their ends, so that
+/// line numbers in errors are right whichever convention a file uses.
+pub(crate) fn split_lines(text: &str) -> impl Iterator<Item = &str> + '_ {
+    let mut rest = Some(text);
+    std::iter::from_fn(move || {
+        let s = rest?;
+        if s.is_empty() {
+            rest = None;
+            return None;
+        }
+        match s.find(['\n', '\r']) {
+            Some(i) => {
+                let skip = if s[i..].starts_with("\r\n") { 2 } else { 1 };
+                rest = Some(&s[i + skip..]);
+                Some(&s[..i])
+            }
+            None => {
+                rest = None;
+                Some(s)
+            }
+        }
+    })
+}
+
 /// A material as written in the input.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MaterialDesc {
     /// Name (MTL `newmtl`, glTF material name).
     pub name: String,
-    /// Diffuse reflectance ρ per channel, linear; must lie in [0, 1).
+    /// Diffuse reflectance ρ per channel, linear; must be ≥ 0 (≥ 1 is lowered to
+    /// [`MAX_REFLECTANCE`] unless [`SceneDesc::strict`]).
     pub reflectance: Rgb,
     /// Emitted radiance L_e per channel (MTL `Ke`); exitance is π·L_e.
     pub emission: Rgb,
@@ -92,6 +195,12 @@ pub struct SceneDesc {
     pub obstructions: Vec<u32>,
     /// Warnings met while reading.
     pub warnings: Vec<Warning>,
+    /// Refuse a reflectance channel ≥ 1 instead of lowering it to [`MAX_REFLECTANCE`].
+    pub strict: bool,
+    /// Light sources in the file that are not surfaces and were ignored, in words (e.g.
+    /// "2 KHR_lights_punctual lights are ignored (not supported yet)"), for the error of a
+    /// scene without light ([`Scene::check_emits`]).
+    pub ignored_lights: Vec<String>,
 }
 
 /// A validated material.
@@ -171,6 +280,11 @@ pub struct Scene {
     pub warnings: Vec<Warning>,
     /// Obstruction-only objects, sorted (see [`SceneDesc::obstructions`]).
     pub obstructions: Vec<u32>,
+    /// The scene's file (the first polygon's), or its name for built-in scenes.
+    pub file: PathBuf,
+    /// Light lost on the way, in words: emitting polygons skipped by validation and
+    /// [`SceneDesc::ignored_lights`] (see [`Scene::check_emits`]).
+    pub lost_light: Vec<String>,
 }
 
 impl Scene {
@@ -207,6 +321,28 @@ impl Scene {
         self.polygons.iter().map(|p| p.area).sum()
     }
 
+    /// True if some polygon emits light.
+    pub fn has_emitter(&self) -> bool {
+        self.polygons.iter().any(|p| self.materials[p.material as usize].is_emitter())
+    }
+
+    /// An error when no surface emits light (a render or solve would be all black), saying
+    /// what was skipped or ignored: emitting polygons dropped as degenerate, lights of a kind
+    /// not supported. View factors need no light and do not call this.
+    pub fn check_emits(&self) -> Result<()> {
+        if self.has_emitter() {
+            return Ok(());
+        }
+        let why = if self.lost_light.is_empty() {
+            "no material has a positive emission (OBJ/MTL Ke, glTF emissiveFactor, TOML emission), so the \
+             image would be black"
+                .to_string()
+        } else {
+            self.lost_light.join("; ")
+        };
+        Err(Error::input(Location::file(&self.file), format!("no surface emits light: {why}")))
+    }
+
     /// True if `object` only blocks rays (see [`SceneDesc::obstructions`]).
     pub fn is_obstruction(&self, object: u32) -> bool {
         self.obstructions.binary_search(&object).is_ok()
@@ -220,6 +356,9 @@ pub fn load(spec: &str) -> Result<SceneDesc> {
         return Ok(desc);
     }
     let path = Path::new(spec);
+    if path.is_dir() {
+        return Err(Error::input(Location::file(path), "is a directory, not a scene file"));
+    }
     if !path.exists() {
         let names = builtin::NAMES.join(", ");
         return Err(Error::Invalid(format!(

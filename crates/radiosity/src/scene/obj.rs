@@ -23,27 +23,25 @@ pub fn load_obj(path: &Path) -> Result<SceneDesc> {
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut desc = parse_obj(&text, path, |name, loc| {
         let p: PathBuf = dir.join(name);
-        let t = std::fs::read_to_string(&p).map_err(|e| {
+        let t = super::read_input(&p).map_err(|e| {
             Error::input(loc.clone(), format!("cannot read material library '{}': {e}", p.display()))
         })?;
-        parse_mtl(&t, &p)
+        parse_mtl(&String::from_utf8_lossy(&t), &p)
     })?;
     desc.name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
     Ok(desc)
 }
 
-/// Reads a whole file as UTF-8 (lossy: OBJ files in the wild contain Latin-1 comments).
+/// Reads a whole input file as UTF-8 (lossy: OBJ files in the wild contain Latin-1
+/// comments); regular files only, with a size cap ([`super::read_input`]).
 pub(crate) fn read_text(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    Ok(match String::from_utf8(bytes) {
-        Ok(s) => s,
-        Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
-    })
+    super::read_input_text(path)
 }
 
-/// Logical lines: `\` at the end of a line continues it. Yields (1-based line, text).
+/// Logical lines: `\` at the end of a line continues it. Yields (1-based line, text). Lines
+/// end at `\n`, `\r\n` or a lone `\r` (old Mac files).
 fn logical_lines(text: &str) -> impl Iterator<Item = (usize, String)> + '_ {
-    let mut lines = text.lines().enumerate();
+    let mut lines = super::split_lines(text).enumerate();
     std::iter::from_fn(move || {
         let (i, first) = lines.next()?;
         let mut s = first.to_string();
@@ -109,7 +107,19 @@ pub fn parse_obj(
                 let x = parse_f64(vals[0], &loc, "vertex x")?;
                 let y = parse_f64(vals[1], &loc, "vertex y")?;
                 let z = parse_f64(vals[2], &loc, "vertex z")?;
-                positions.push(DVec3::new(x, y, z));
+                let p = DVec3::new(x, y, z);
+                if p.abs().max_element() > super::MAX_COORDINATE {
+                    return Err(Error::input(
+                        loc,
+                        format!(
+                            "vertex {:?} has a coordinate of magnitude above {:e}, where areas and squared distances \
+                             overflow; rescale the scene",
+                            p.to_array(),
+                            super::MAX_COORDINATE
+                        ),
+                    ));
+                }
+                positions.push(p);
             }
             "vt" | "vn" | "vp" | "s" | "mg" | "shadow_obj" | "trace_obj" => {}
             "f" | "fo" => {
@@ -254,14 +264,11 @@ pub fn parse_mtl(text: &str, file: &Path) -> Result<Vec<MaterialDesc>> {
                     return Err(Error::input(loc, format!("{kw} before any newmtl")));
                 };
                 if kw == "Kd" {
-                    if c.to_array().iter().any(|x| *x < 0.0 || *x >= 1.0) {
+                    // Kd ≥ 1 is lowered (or refused in strict mode) by validation.
+                    if c.to_array().iter().any(|x| *x < 0.0) {
                         return Err(Error::input(
                             loc,
-                            format!(
-                                "material '{}': Kd {:?} is outside [0, 1) (diffuse reflectance must be below 1)",
-                                m.name,
-                                c.to_array()
-                            ),
+                            format!("material '{}': Kd {:?} must be non-negative", m.name, c.to_array()),
                         ));
                     }
                     m.reflectance = c;
@@ -271,6 +278,17 @@ pub fn parse_mtl(text: &str, file: &Path) -> Result<Vec<MaterialDesc>> {
                         return Err(Error::input(
                             loc,
                             format!("material '{}': Ke {:?} must be non-negative", m.name, c.to_array()),
+                        ));
+                    }
+                    if c.max_element() > super::MAX_EMISSION {
+                        return Err(Error::input(
+                            loc,
+                            format!(
+                                "material '{}': Ke {:?} is above {:e}, where emitted power would overflow; rescale it",
+                                m.name,
+                                c.to_array(),
+                                super::MAX_EMISSION
+                            ),
                         ));
                     }
                     m.emission = c;
@@ -320,8 +338,11 @@ mod tests {
     }
 
     #[test]
-    fn mtl_rejects_reflectance_of_one() {
-        let e = parse_mtl("newmtl a\nKd 1 0.5 0.5\n", Path::new("m.mtl")).unwrap_err();
+    fn mtl_keeps_reflectance_of_one_for_validation_and_rejects_negative() {
+        let m = parse_mtl("newmtl a\nKd 1 0.5 0.5\n", Path::new("m.mtl")).unwrap();
+        assert_eq!(m[0].reflectance, Rgb::new(1.0, 0.5, 0.5));
+        assert_eq!(m[0].loc, Some(Location::line("m.mtl", 2)));
+        let e = parse_mtl("newmtl a\nKd -1 0.5 0.5\n", Path::new("m.mtl")).unwrap_err();
         assert!(e.to_string().starts_with("m.mtl:2:"), "{e}");
         let e = parse_mtl("Kd 0.5\n", Path::new("m.mtl")).unwrap_err();
         assert!(e.to_string().contains("before any newmtl"), "{e}");

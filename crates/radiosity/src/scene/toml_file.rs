@@ -23,14 +23,15 @@
 //! mesh has is an error that lists the names there are. As in Mitsuba, a key nobody reads
 //! is an error (serde `deny_unknown_fields`), so a typo such as `emision` is caught; every
 //! error names this file with line and column (the `toml` crate's byte span converted).
-//! Values are checked as in the other formats: reflectance finite and in [0, 1), emission
+//! Values are checked as in the other formats: reflectance finite and ≥ 0, emission
 //! finite and ≥ 0 (TOML allows `nan` and `inf`; they are rejected here).
 //!
 //! The camera given here replaces the mesh's own (a glTF camera); without one the first
 //! mesh's camera is used. With several meshes their materials and objects are
-//! concatenated in order. A glTF mesh's `baseColorFactor` ≥ 1 is an error unless an
-//! override here sets that material's reflectance: this is how a glTF exported with the
-//! default white base colour is made usable. Example: `scenes/cornell-blue-light.toml`.
+//! concatenated in order. A reflectance channel ≥ 1 (here or a glTF mesh's
+//! `baseColorFactor`, glTF's default white) is lowered by validation to
+//! [`super::MAX_REFLECTANCE`] with a warning (refused in strict mode); an override here sets
+//! the value actually wanted. Example: `scenes/cornell-blue-light.toml`.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -169,6 +170,7 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
             p
         }));
         desc.warnings.extend(part.warnings);
+        desc.ignored_lights.extend(part.ignored_lights);
         desc.two_sided |= part.two_sided;
         if mesh_camera.is_none() {
             mesh_camera = part.camera;
@@ -184,10 +186,9 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
             Some(match c.into_inner() {
                 CameraSpec::File(f) => {
                     let p = dir.join(&f);
-                    if !p.is_file() {
-                        return Err(Error::input(loc, format!("camera file '{}' does not exist", p.display())));
-                    }
-                    Camera::load_json(&p)?
+                    let text = super::read_input(&p)
+                        .map_err(|e| Error::input(loc, format!("camera file '{}': {e}", p.display())))?;
+                    Camera::from_json_str(&String::from_utf8_lossy(&text), &p)?
                 }
                 CameraSpec::Inline(t) => {
                     let cam = Camera {
@@ -210,10 +211,11 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
         let reflectance = match &ov.reflectance {
             Some(r) => {
                 let v = *r.get_ref();
-                if v.iter().any(|c| !c.is_finite() || *c < 0.0 || *c >= 1.0) {
+                // ≥ 1 is lowered (or refused in strict mode) by validation, at this table.
+                if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
                     return Err(Error::input(
                         at(r.span()),
-                        format!("material '{name}': reflectance {v:?} is outside [0, 1) (a surface cannot reflect more than it receives)"),
+                        format!("material '{name}': reflectance {v:?} must be finite and non-negative"),
                     ));
                 }
                 Some(Rgb::from_array(v))
@@ -285,8 +287,18 @@ fn load_mesh(spec: &str, loc: Location, dir: &Path) -> Result<(SceneDesc, bool)>
         };
     }
     let path: PathBuf = dir.join(spec);
+    if let Err(e) = std::fs::metadata(&path) {
+        let why = if e.kind() == std::io::ErrorKind::NotFound { "does not exist".to_string() } else { e.to_string() };
+        return Err(Error::input(loc, format!("mesh file '{}' {why}", path.display())));
+    }
+    if path.is_dir() {
+        return Err(Error::input(loc, format!("mesh file '{}' is a directory, not a file", path.display())));
+    }
     if !path.is_file() {
-        return Err(Error::input(loc, format!("mesh file '{}' does not exist", path.display())));
+        return Err(Error::input(
+            loc,
+            format!("mesh file '{}' is not a regular file (a device, FIFO or socket); only regular files are read", path.display()),
+        ));
     }
     let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).unwrap_or_default();
     match ext.as_str() {
@@ -331,8 +343,18 @@ mod tests {
     fn values_are_checked() {
         let e = parse("mesh = \"builtin:cornell\"\n[materials.light]\nemission = [1, nan, 3]\n").unwrap_err();
         assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("finite"), "{e}");
-        let e = parse("mesh = \"builtin:cornell\"\n[materials.white]\nreflectance = [1, 0.5, 0.5]\n").unwrap_err();
-        assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("[0, 1)"), "{e}");
+        // Reflectance 1: lowered by validation with a warning at the override's table, refused
+        // there in strict mode.
+        let mut d = parse("mesh = \"builtin:cornell\"\n[materials.white]\nreflectance = [1, 0.5, 0.5]\n").unwrap();
+        let s = crate::scene::Scene::from_desc(d.clone()).unwrap();
+        let white = s.materials.iter().find(|m| m.name == "white").unwrap();
+        assert_eq!(white.reflectance, Rgb::new(crate::scene::MAX_REFLECTANCE, 0.5, 0.5));
+        assert!(s.warnings.iter().any(|w| w.msg.contains("'white' (s.toml:2:")), "{:?}", s.warnings);
+        d.strict = true;
+        let e = crate::scene::Scene::from_desc(d).unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:2:") && e.to_string().contains("[0, 1)"), "{e}");
+        let e = parse("mesh = \"builtin:cornell\"\n[materials.white]\nreflectance = [-1, 0.5, 0.5]\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("non-negative"), "{e}");
         let e = parse("mesh = \"builtin:cornell\"\n[materials.nope]\nemission = [1, 1, 1]\n").unwrap_err();
         assert!(e.to_string().starts_with("s.toml:2:") && e.to_string().contains("green, light, red, white"), "{e}");
     }

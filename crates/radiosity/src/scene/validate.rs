@@ -4,7 +4,7 @@ use std::collections::HashMap;
 
 use glam::{DVec2, DVec3};
 
-use super::{Material, Object, Polygon, Scene, SceneDesc};
+use super::{Material, Object, Polygon, Scene, SceneDesc, MAX_COORDINATE, MAX_EMISSION, MAX_POLYGON_VERTICES, MAX_REFLECTANCE};
 use crate::{Error, Location, Result, Warning};
 
 /// Relative out-of-plane distance (to the polygon's diameter) above which a polygon is
@@ -12,21 +12,50 @@ use crate::{Error, Location, Result, Warning};
 const PLANARITY_TOL: f64 = 1e-6;
 
 pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
-    let SceneDesc { name, materials, objects, polygons, camera, two_sided, obstructions, mut warnings } = desc;
-    let here = |loc: &Option<Location>| loc.clone().unwrap_or_else(|| Location::file(&name));
+    let SceneDesc {
+        name,
+        materials,
+        objects,
+        polygons,
+        camera,
+        two_sided,
+        obstructions,
+        mut warnings,
+        strict,
+        ignored_lights,
+    } = desc;
+    // The scene's file: where its polygons came from (built-in scenes: the name).
+    let file = polygons.iter().find_map(|p| p.loc.as_ref().map(|l| l.file.clone())).unwrap_or_else(|| name.clone().into());
+    let here = |loc: &Option<Location>| loc.clone().unwrap_or_else(|| Location::file(&file));
 
     // Materials: physical values only.
     let mut mats = Vec::with_capacity(materials.len());
+    let mut capped: Vec<String> = Vec::new();
     for m in &materials {
         let r = m.reflectance.to_array();
-        if r.iter().any(|c| !c.is_finite() || *c < 0.0 || *c >= 1.0) {
+        if r.iter().any(|c| !c.is_finite() || *c < 0.0) {
             return Err(Error::input(
                 here(&m.loc),
-                format!(
-                    "material '{}': reflectance {:?} is outside [0, 1) (a surface cannot reflect more than it receives)",
-                    m.name, r
-                ),
+                format!("material '{}': reflectance {:?} must be finite and non-negative", m.name, r),
             ));
+        }
+        let mut reflectance = m.reflectance;
+        if r.iter().any(|c| *c >= 1.0) {
+            if strict {
+                return Err(Error::input(
+                    here(&m.loc),
+                    format!(
+                        "material '{}': reflectance {:?} is outside [0, 1) (a surface cannot reflect more than it \
+                         receives; strict mode refuses it instead of lowering it to {MAX_REFLECTANCE})",
+                        m.name, r
+                    ),
+                ));
+            }
+            reflectance = crate::Rgb::from_array(r.map(|c| c.min(MAX_REFLECTANCE)));
+            capped.push(match &m.loc {
+                Some(l) => format!("'{}' ({l})", m.name),
+                None => format!("'{}'", m.name),
+            });
         }
         let e = m.emission.to_array();
         if e.iter().any(|c| !c.is_finite() || *c < 0.0) {
@@ -35,26 +64,62 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
                 format!("material '{}': emitted radiance {:?} must be finite and non-negative", m.name, e),
             ));
         }
-        mats.push(Material {
-            name: m.name.clone(),
-            reflectance: m.reflectance,
-            emission: m.emission,
-            two_sided: m.two_sided || two_sided,
+        if e.iter().any(|c| *c > MAX_EMISSION) {
+            return Err(Error::input(
+                here(&m.loc),
+                format!(
+                    "material '{}': emitted radiance {:?} is above {MAX_EMISSION:e}, where emitted power would \
+                     overflow; rescale the emission",
+                    m.name, e
+                ),
+            ));
+        }
+        mats.push(Material { name: m.name.clone(), reflectance, emission: m.emission, two_sided: m.two_sided || two_sided });
+    }
+    if !capped.is_empty() {
+        warnings.push(Warning {
+            loc: Some(Location::file(&file)),
+            msg: format!(
+                "reflectance ≥ 1 lowered to {MAX_REFLECTANCE} (a surface that reflects everything never absorbs) \
+                 in {} material(s): {}",
+                capped.len(),
+                capped.join(", ")
+            ),
         });
     }
     if let Some(cam) = &camera {
-        cam.validate().map_err(|msg| Error::input(Location::file(&name), msg))?;
+        cam.validate().map_err(|msg| Error::input(Location::file(&file), msg))?;
     }
 
     // Scene scale, for tolerances.
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
     for p in &polygons {
+        if p.vertices.len() > MAX_POLYGON_VERTICES {
+            return Err(Error::input(
+                here(&p.loc),
+                format!(
+                    "polygon has {} vertices; at most {MAX_POLYGON_VERTICES} are supported (split it into smaller \
+                     polygons)",
+                    p.vertices.len()
+                ),
+            ));
+        }
         for v in &p.vertices {
             if !v.is_finite() {
                 return Err(Error::input(
                     here(&p.loc),
                     format!("polygon has a non-finite vertex coordinate {:?}", v.to_array()),
+                ));
+            }
+            if v.abs().max_element() > MAX_COORDINATE {
+                return Err(Error::input(
+                    here(&p.loc),
+                    format!(
+                        "polygon has a vertex coordinate {:?} of magnitude above {MAX_COORDINATE:e}, where areas and \
+                         squared distances overflow; rescale the scene",
+                        v.to_array()
+                    ),
                 ));
             }
             lo = lo.min(*v);
@@ -64,20 +129,26 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     let diag = if lo.x <= hi.x { (hi - lo).length() } else { 0.0 };
 
     let mut out = Vec::with_capacity(polygons.len());
-    let mut skipped = 0usize;
-    let mut first_skips: Vec<Warning> = Vec::new();
+    let mut degenerate = Skips::default();
+    let mut crossing = Skips::default();
+    let mut tiny = Skips::default();
+    let mut lost_emitters = Skips::default();
     let mut split_nonplanar = 0usize;
     let mut first_split: Option<Location> = None;
     for p in &polygons {
         if p.material as usize >= mats.len() || p.object as usize >= objects.len() {
             return Err(Error::input(here(&p.loc), "polygon refers to a material or object that does not exist"));
         }
+        let emits = mats[p.material as usize].is_emitter();
         let mut pieces: Vec<Vec<DVec3>> = Vec::new();
         match clean_polygon(&p.vertices, diag) {
             Err(why) => {
-                skipped += 1;
-                if first_skips.len() < 5 {
-                    first_skips.push(Warning { loc: p.loc.clone(), msg: format!("skipped degenerate polygon: {why}") });
+                if degenerate.count < 5 {
+                    warnings.push(Warning { loc: p.loc.clone(), msg: format!("skipped degenerate polygon: {why}") });
+                }
+                degenerate.add(&p.loc, &why);
+                if emits {
+                    lost_emitters.add(&p.loc, "degenerate");
                 }
                 continue;
             }
@@ -94,18 +165,19 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             Ok(Cleaned::Concave(v, n)) => match ear_clip(&v, n) {
                 Some(tris) => pieces.extend(tris),
                 None => {
-                    skipped += 1;
-                    if first_skips.len() < 5 {
-                        first_skips.push(Warning {
-                            loc: p.loc.clone(),
-                            msg: "skipped self-intersecting polygon".into(),
-                        });
+                    if crossing.count < 5 {
+                        warnings.push(Warning { loc: p.loc.clone(), msg: "skipped self-intersecting polygon".into() });
+                    }
+                    crossing.add(&p.loc, "self-intersecting");
+                    if emits {
+                        lost_emitters.add(&p.loc, "self-intersecting");
                     }
                     continue;
                 }
             },
         }
         let two = mats[p.material as usize].two_sided;
+        let before = out.len();
         for v in pieces {
             let nn = super::newell_normal(&v);
             let area = 0.5 * nn.length();
@@ -129,14 +201,16 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             }
             out.push(Polygon { vertices: v, normal, area, material: p.material, object: p.object, back_side: false, two_sided: two, loc: p.loc.clone() });
         }
-    }
-    // Keep front sides before back sides of the same input polygon? Order does not matter
-    // for the physics; sort is stable so report order follows input.
-    if skipped > 0 {
-        warnings.extend(first_skips);
-        if skipped > 5 {
-            warnings.push(Warning { loc: Some(Location::file(&name)), msg: format!("{skipped} degenerate polygons skipped in all") });
+        if out.len() == before {
+            tiny.add(&p.loc, "too small for the scene's size");
+            if emits {
+                lost_emitters.add(&p.loc, "too small");
+            }
         }
+    }
+    let skipped = degenerate.count + crossing.count;
+    if skipped > 5 {
+        warnings.push(Warning { loc: Some(Location::file(&file)), msg: format!("{skipped} degenerate or self-intersecting polygons skipped in all") });
     }
     if split_nonplanar > 0 {
         warnings.push(Warning {
@@ -146,8 +220,25 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     }
     drop_duplicates(&mut out, diag, &mut warnings);
     if out.is_empty() {
-        return Err(Error::Invalid(format!("{name}: the scene has no usable polygons")));
+        let mut why: Vec<String> = Vec::new();
+        degenerate.describe(&mut why, "degenerate");
+        crossing.describe(&mut why, "self-intersecting");
+        // (A reason equal to the heading is not repeated after the location.)
+        tiny.describe(&mut why, "too small for the scene's size");
+        let msg = if polygons.is_empty() {
+            "the scene has no usable polygons: it has no polygons at all".to_string()
+        } else {
+            format!("the scene has no usable polygons: all {} polygons were skipped: {}", polygons.len(), why.join(", "))
+        };
+        return Err(Error::input(Location::file(&file), msg));
     }
+    let mut lost_light = Vec::new();
+    if lost_emitters.count > 0 {
+        let n = lost_emitters.count;
+        let at = lost_emitters.first.as_ref().map(|l| format!(" (first at {l}: {})", lost_emitters.first_why)).unwrap_or_default();
+        lost_light.push(format!("{n} emitting polygon{} {} skipped{at}", if n == 1 { "" } else { "s" }, if n == 1 { "was" } else { "were" }));
+    }
+    lost_light.extend(ignored_lights);
 
     // Unique object names: a name used by several objects gets '#k' (k-th, 1-based).
     let mut count: HashMap<&str, usize> = HashMap::new();
@@ -174,7 +265,38 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     }
     obstructions.sort_unstable();
     obstructions.dedup();
-    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions })
+    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions, file, lost_light })
+}
+
+/// Polygons skipped for one reason: how many, and the first.
+#[derive(Default)]
+struct Skips {
+    count: usize,
+    first: Option<Location>,
+    first_why: String,
+}
+
+impl Skips {
+    fn add(&mut self, loc: &Option<Location>, why: &str) {
+        if self.count == 0 {
+            self.first = loc.clone();
+            self.first_why = why.to_string();
+        }
+        self.count += 1;
+    }
+
+    /// "10 degenerate (first at f.obj:7: 2 distinct vertices)".
+    fn describe(&self, out: &mut Vec<String>, what: &str) {
+        if self.count == 0 {
+            return;
+        }
+        let at = match &self.first {
+            Some(l) if self.first_why != what => format!(" (first at {l}: {})", self.first_why),
+            Some(l) => format!(" (first at {l})"),
+            None => String::new(),
+        };
+        out.push(format!("{} {what}{at}", self.count));
+    }
 }
 
 /// Removes polygons that repeat an earlier one exactly (the same vertices in the same
@@ -253,12 +375,10 @@ fn clean_polygon(input: &[DVec3], diag: f64) -> std::result::Result<Cleaned, Str
     }
     let nn = super::newell_normal(&v);
     let area = 0.5 * nn.length();
-    let mut diam: f64 = 0.0;
-    for a in &v {
-        for b in &v {
-            diam = diam.max((*a - *b).length());
-        }
-    }
+    // The bounding box's diagonal: within √3 of the diameter, in O(n) (the pairwise
+    // maximum took minutes on a 500,000-vertex face).
+    let (plo, phi) = v.iter().fold((v[0], v[0]), |(l, h), p| (l.min(*p), h.max(*p)));
+    let diam = (phi - plo).length();
     if !(area > 1e-12 * diam * diam) || area <= 1e-14 * diag * diag {
         return Err(format!("zero area ({area:e})"));
     }
@@ -268,29 +388,8 @@ fn clean_polygon(input: &[DVec3], diag: f64) -> std::result::Result<Cleaned, Str
     if v.len() > 3 && off > PLANARITY_TOL * diam {
         return Ok(Cleaned::NonPlanar(v));
     }
-    // Drop collinear vertices (turn of ~0 and continuing forward).
-    loop {
-        let m = v.len();
-        if m <= 3 {
-            break;
-        }
-        let mut removed = false;
-        for i in 0..m {
-            let a = v[(i + m - 1) % m];
-            let b = v[i];
-            let d = v[(i + 1) % m];
-            let e1 = b - a;
-            let e2 = d - b;
-            if e1.cross(e2).length() <= 1e-10 * e1.length() * e2.length() && e1.dot(e2) > 0.0 {
-                v.remove(i);
-                removed = true;
-                break;
-            }
-        }
-        if !removed {
-            break;
-        }
-    }
+    // Drop collinear vertices (turn of ~0 and continuing forward), in one pass.
+    let v = drop_collinear(v);
     let m = v.len();
     let convex = (0..m).all(|i| {
         let a = v[(i + m - 1) % m];
@@ -302,6 +401,40 @@ fn clean_polygon(input: &[DVec3], diag: f64) -> std::result::Result<Cleaned, Str
         Ok(Cleaned::Convex(v))
     } else {
         Ok(Cleaned::Concave(v, n))
+    }
+}
+
+/// Removes vertices where the boundary goes straight on, in O(n): a stack pass, then the
+/// seam between the last and the first vertices.
+fn drop_collinear(v: Vec<DVec3>) -> Vec<DVec3> {
+    let straight = |a: DVec3, b: DVec3, d: DVec3| {
+        let e1 = b - a;
+        let e2 = d - b;
+        e1.cross(e2).length() <= 1e-10 * e1.length() * e2.length() && e1.dot(e2) > 0.0
+    };
+    let mut s: Vec<DVec3> = Vec::with_capacity(v.len());
+    for &p in &v {
+        while s.len() >= 2 && straight(s[s.len() - 2], s[s.len() - 1], p) {
+            s.pop();
+        }
+        s.push(p);
+    }
+    let mut first = 0;
+    while s.len() - first > 3 {
+        let m = s.len();
+        if straight(s[m - 2], s[m - 1], s[first]) {
+            s.pop();
+        } else if straight(s[m - 1], s[first], s[first + 1]) {
+            first += 1;
+        } else {
+            break;
+        }
+    }
+    let s = s.split_off(first.min(s.len()));
+    if s.len() < 3 {
+        v
+    } else {
+        s
     }
 }
 
@@ -320,23 +453,28 @@ fn ear_clip(v: &[DVec3], n: DVec3) -> Option<Vec<Vec<DVec3>>> {
     let p2: Vec<DVec2> = v.iter().map(|p| DVec2::new(p[ix], p[iy]) * DVec2::new(1.0, sign)).collect();
     let cross = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
     let mut idx: Vec<usize> = (0..v.len()).collect();
+    // Only reflex vertices can lie inside an ear (if any vertex does, a reflex one does),
+    // and clipping never makes a convex vertex reflex: test against the first ones.
+    let nv = v.len();
+    let reflex: Vec<usize> =
+        (0..nv).filter(|&i| cross(p2[(i + nv - 1) % nv], p2[i], p2[(i + 1) % nv]) <= 0.0).collect();
+    let mut alive = vec![true; nv];
     let mut tris = Vec::new();
-    let mut guard = 0;
+    let mut k = 0;
     while idx.len() > 3 {
-        guard += 1;
-        if guard > 10 * v.len() * v.len() {
-            return None;
-        }
         let m = idx.len();
         let mut found = false;
-        for k in 0..m {
-            let (i0, i1, i2) = (idx[(k + m - 1) % m], idx[k], idx[(k + 1) % m]);
+        // Resume where the last ear was cut: ears cluster, so this is O(n) per ear at worst
+        // and usually O(1).
+        for step in 0..m {
+            let kk = (k + step) % m;
+            let (i0, i1, i2) = (idx[(kk + m - 1) % m], idx[kk], idx[(kk + 1) % m]);
             let (a, b, c) = (p2[i0], p2[i1], p2[i2]);
             if cross(a, b, c) <= 0.0 {
                 continue;
             }
-            let inside = idx.iter().any(|&j| {
-                if j == i0 || j == i1 || j == i2 {
+            let inside = reflex.iter().any(|&j| {
+                if !alive[j] || j == i0 || j == i1 || j == i2 {
                     return false;
                 }
                 let p = p2[j];
@@ -346,7 +484,9 @@ fn ear_clip(v: &[DVec3], n: DVec3) -> Option<Vec<Vec<DVec3>>> {
                 continue;
             }
             tris.push(vec![v[i0], v[i1], v[i2]]);
-            idx.remove(k);
+            idx.remove(kk);
+            alive[i1] = false;
+            k = if kk == 0 { 0 } else { kk - 1 };
             found = true;
             break;
         }
@@ -411,11 +551,35 @@ mod tests {
     }
 
     #[test]
-    fn reflectance_of_one_is_rejected() {
+    fn reflectance_of_one_is_lowered_or_rejected_when_strict() {
         let mut d = desc(vec![vec![DVec3::ZERO, DVec3::X, DVec3::Y]]);
         d.materials[0].reflectance = Rgb::new(0.5, 1.0, 0.5);
-        let e = Scene::from_desc(d).unwrap_err();
+        let s = Scene::from_desc(d.clone()).unwrap();
+        assert_eq!(s.materials[0].reflectance, Rgb::new(0.5, MAX_REFLECTANCE, 0.5));
+        assert_eq!(s.warnings.iter().filter(|w| w.msg.contains("lowered")).count(), 1);
+        d.strict = true;
+        let e = Scene::from_desc(d.clone()).unwrap_err();
         assert!(e.to_string().contains("outside [0, 1)"), "{e}");
+        d.strict = false;
+        d.materials[0].reflectance = Rgb::new(0.5, -0.1, 0.5);
+        assert!(Scene::from_desc(d).unwrap_err().to_string().contains("non-negative"));
+    }
+
+    #[test]
+    fn collinear_vertices_are_dropped_in_one_pass() {
+        // A square with extra points on every edge and across the seam (first/last).
+        let mut sq = Vec::new();
+        for k in 0..4 {
+            let (a, b) = [(DVec3::ZERO, DVec3::X), (DVec3::X, DVec3::new(1., 1., 0.)), (DVec3::new(1., 1., 0.), DVec3::Y), (DVec3::Y, DVec3::ZERO)][k];
+            for i in 0..5 {
+                sq.push(a + (b - a) * (i as f64 / 5.0));
+            }
+        }
+        sq.rotate_left(2); // start in the middle of an edge
+        let s = Scene::from_desc(desc(vec![sq])).unwrap();
+        assert_eq!(s.polygons.len(), 1);
+        assert_eq!(s.polygons[0].vertices.len(), 4);
+        assert!((s.polygons[0].area - 1.0).abs() < 1e-12);
     }
 
     #[test]

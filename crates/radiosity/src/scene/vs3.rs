@@ -74,7 +74,7 @@ pub fn parse_vs3(text: &str, path: &Path) -> Result<(SceneDesc, Vs3Control)> {
     let mut surfaces: Vec<Surface> = Vec::new();
     let mut numbers: HashMap<i64, usize> = HashMap::new();
     let mut saw_geometry = false;
-    'lines: for (ln, raw) in text.lines().enumerate() {
+    'lines: for (ln, raw) in super::split_lines(text).enumerate() {
         let lineno = ln + 1;
         let loc = Location::line(path, lineno);
         let line = match raw.find('!') {
