@@ -142,7 +142,7 @@ fn kajiya_cornell_box_from_shared() {
     let mut names: Vec<&str> = d.materials.iter().map(|m| m.name.as_str()).collect();
     names.sort();
     assert_eq!(names, ["backWall", "ceiling", "floor", "leftWall", "light", "rightWall", "shortBox", "tallBox"]);
-    assert!(d.materials.iter().all(|m| m.two_sided && m.emission == Rgb::ZERO));
+    assert!(d.materials.iter().all(|m| m.two_sided == Some(true) && m.emission == Rgb::ZERO));
     let light = d.materials.iter().find(|m| m.name == "light").unwrap();
     // The material's line in the JSON text.
     let text = std::fs::read_to_string(&p).unwrap();
@@ -352,7 +352,7 @@ fn emissive_strength_multiplies_emissive_factor() {
     let m = &d.materials[0];
     assert_eq!(m.emission, Rgb::new(4.0, 2.0, 1.0));
     assert_eq!(m.reflectance, Rgb::splat(0.5));
-    assert!(m.two_sided);
+    assert_eq!(m.two_sided, Some(true));
     let s = Scene::from_desc(d).unwrap();
     assert_eq!(s.polygons.len(), 2, "double-sided: a back copy");
     assert!((s.materials[0].exitance().x - 4.0 * std::f64::consts::PI).abs() < 1e-12);

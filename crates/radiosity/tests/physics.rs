@@ -163,10 +163,19 @@ fn cornell_box_factors_are_reciprocal_and_rows_at_most_one() {
     let (mesh, f, area) = factors(&scene, 80.0);
     let (_, mean) = reciprocity(&mesh, &f, &area);
     assert!(mean <= 0.05, "mean reciprocity error {mean}");
-    // The open front lets light escape: the floor's rows must sum to clearly less than 1.
-    let floor_rows: Vec<f64> = (0..mesh.patches[0].count as usize).map(|i| f.row_sum(i)).collect();
-    let mean = floor_rows.iter().sum::<f64>() / floor_rows.len() as f64;
-    assert!(mean > 0.5 && mean < 0.95, "floor mean row sum {mean}");
+    // The open front lets light escape: the floor's area-weighted row sum against the
+    // path-traced reference's 1 − escaped (Mitsuba, 4M rays per face, σ ≤ 2.5e-4). The
+    // reference samples the whole floor, covered parts under the blocks included, and we
+    // the open part: 1e-2 absolute.
+    let text = std::fs::read_to_string(format!("{}/tests/data/cornell_view_factors_monte_carlo.json", env!("CARGO_MANIFEST_DIR"))).unwrap();
+    let reference: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let floor = reference["faces"].as_array().unwrap().iter().position(|f| f == "floor").unwrap();
+    let expect = 1.0 - reference["escaped_through_open_front"][floor].as_f64().unwrap();
+    let n = mesh.patches[0].count as usize;
+    let (num, den) = (0..n).fold((0.0, 0.0), |(a, b), i| (a + area[i] * f.row_sum(i), b + area[i]));
+    let mean = num / den;
+    eprintln!("floor row sum {mean:.5}, reference {expect:.5}");
+    assert!((mean - expect).abs() <= 1e-2, "floor row sum {mean:.5} vs reference {expect:.5}");
 }
 
 /// Issue 9: one mesh and one F give one answer, whichever solver. The Cornell box at mesh

@@ -87,8 +87,25 @@ fn several_meshes_are_concatenated_with_offsets() {
     assert_eq!(d.materials.len(), 1 + 4);
     let floor = d.polygons.iter().find(|q| d.objects[q.object as usize].name == "floor" && q.material != 0).unwrap();
     assert!(floor.material >= 1 && floor.object >= 6);
-    assert!(d.materials[0].two_sided && !d.materials[1].two_sided);
+    assert!(d.materials[0].two_sided == Some(true) && d.materials[1].two_sided.is_none());
     Scene::from_desc(d).unwrap();
+}
+
+/// Issue 9: everything two-sided but the lamp. A material's own `two_sided = false` holds
+/// against the scene's `two_sided = true` (and the CLI's --two-sided, which sets the same).
+#[test]
+fn material_two_sided_false_keeps_an_emitter_one_sided_in_a_two_sided_scene() {
+    let p = write(
+        "one-sided-lamp.toml",
+        &format!("two_sided = true\nmeshes = [{:?}]\n[materials.light]\ntwo_sided = false\n", cornell_obj()),
+    );
+    let s = Scene::from_desc(load_toml(&p).unwrap()).unwrap();
+    let light = s.materials.iter().position(|m| m.name == "light").unwrap() as u32;
+    let lamp: Vec<_> = s.polygons.iter().filter(|q| q.material == light).collect();
+    assert!(!lamp.is_empty() && lamp.iter().all(|q| !q.back_side && !q.two_sided), "the lamp stays one-sided");
+    let front = s.polygons.iter().filter(|q| q.material != light && !q.back_side).count();
+    let back = s.polygons.iter().filter(|q| q.material != light && q.back_side).count();
+    assert!(front >= 18 && back == front, "every other polygon has a back copy: {front} fronts, {back} backs");
 }
 
 /// A glTF whose only material has the default white base colour (1.0): unusable alone,

@@ -288,14 +288,7 @@ pub fn compute(
         Ok(())
     })?;
     let rows = SparseRows::from_rows(rows);
-    let mut stats = Stats { nonzeros: rows.nnz() as u64, ..stats };
-    if let Some(i) = stats.guard.worst_row {
-        stats.guard.worst_source = mesh.elements.get(i).and_then(|e| scene.polygons[e.patch as usize].loc.as_ref()).map(|l| l.to_string());
-    }
-    if let Some(w) = stats.guard.warning() {
-        progress.message(&format!("warning: {w}"));
-        stats.warnings.push(w);
-    }
+    let stats = Stats { nonzeros: rows.nnz() as u64, ..stats };
     Ok((rows, stats))
 }
 
@@ -326,7 +319,7 @@ pub fn for_each_row(
         }
     };
     let ctx = Context::new(scene, mesh, rays, receivers, opts);
-    let (nonzeros, nrays, guard) = match opts.method {
+    let (nonzeros, nrays, mut guard) = match opts.method {
         Method::Hemicube => drive(&hemicube::Rows::new(&ctx), which, progress, sink)?,
         Method::Analytic => {
             warn_occlusion(scene, progress, &mut warnings);
@@ -336,6 +329,10 @@ pub fn for_each_row(
         Method::MonteCarlo => drive(&monte_carlo::Rows::new(&ctx), which, progress, sink)?,
         Method::Adaptive => drive(&adaptive::Rows::new(&ctx), which, progress, sink)?,
     };
+    if let Some(i) = guard.worst_row {
+        guard.worst_source = mesh.elements.get(i).and_then(|e| scene.polygons[e.patch as usize].loc.as_ref()).map(|l| l.to_string());
+    }
+    guard_warning(&guard, progress, &mut warnings);
     Ok(Stats {
         method: opts.method.name().to_string(),
         nonzeros,
@@ -383,7 +380,15 @@ pub fn for_each_polygon_row(
     if let Some(p) = guard.worst_row {
         guard.worst_source = scene.polygons.get(p).and_then(|p| p.loc.as_ref()).map(|l| l.to_string());
     }
+    guard_warning(&guard, progress, &mut warnings);
     Ok(Stats { method: opts.method.name().to_string(), nonzeros, rays: nrays, seconds: t0.elapsed().as_secs_f64(), warnings, guard })
+}
+
+fn guard_warning(guard: &RowGuard, progress: &dyn Progress, warnings: &mut Vec<String>) {
+    if let Some(w) = guard.warning() {
+        progress.message(&format!("warning: {w}"));
+        warnings.push(w);
+    }
 }
 
 fn warn_occlusion(scene: &Scene, progress: &dyn Progress, warnings: &mut Vec<String>) {

@@ -47,8 +47,8 @@ pub struct Receivers {
 }
 
 impl Receivers {
-    /// Open receiver points of element `e` on the `k × k` grid (1 ≤ k ≤ MAX_K). Empty when
-    /// the element is entirely covered.
+    /// Open receiver points of element `e` on the `k × k` grid (1 ≤ k ≤ MAX_K); for an
+    /// element that is entirely covered, all of them (it gathers, but has no open area).
     #[inline]
     pub fn points(&self, e: usize, k: usize) -> &[DVec3] {
         &self.points[e][k.clamp(1, MAX_K) - 1]
@@ -140,6 +140,16 @@ impl Receivers {
                 };
                 if lv[1].is_empty() {
                     lv[1] = lv[MAX_K - 1].clone();
+                }
+                // An element wholly inside closed geometry still gets receiver points (all
+                // of them): it has no open area, so it sends no power, but its radiosity is
+                // what the inside of the solid sees — in a two-sided furnace, the faces of
+                // one box inside another must still read E/(1 − ρ), not E (issue 9).
+                if open3 == 0 && lv.iter().all(|l| l.is_empty()) {
+                    for (k, l) in lv.iter_mut().enumerate() {
+                        *l = grid(e, &mesh.positions, k + 1);
+                    }
+                    lv[0] = vec![e.centroid];
                 }
                 (lv, frac)
             })

@@ -61,7 +61,7 @@ pub fn furnace(reflectance: f64, radiance: f64) -> SceneDesc {
         name: "furnace".into(),
         reflectance: Rgb::splat(reflectance),
         emission: Rgb::splat(radiance),
-        two_sided: false,
+        two_sided: None,
         loc: None,
     });
     for (i, (name, v)) in faces.iter().enumerate() {

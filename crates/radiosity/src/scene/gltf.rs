@@ -652,7 +652,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             .map(|s| f64::from(s.emissive_strength.0))
             .unwrap_or(1.0);
         let emission = Rgb::new(e[0].into(), e[1].into(), e[2].into()) * strength;
-        MaterialDesc { name, reflectance, emission, two_sided: m.double_sided, loc: Some(loc) }
+        MaterialDesc { name, reflectance, emission, two_sided: m.double_sided.then_some(true), loc: Some(loc) }
     }
 
     /// All triangles of mesh `mi` in its own frame.

@@ -140,8 +140,11 @@ pub struct MaterialDesc {
     pub reflectance: Rgb,
     /// Emitted radiance L_e per channel (MTL `Ke`); exitance is π·L_e.
     pub emission: Rgb,
-    /// Both sides of surfaces with this material reflect (and emit).
-    pub two_sided: bool,
+    /// Both sides of surfaces with this material reflect (and emit): `Some(true)`; only the
+    /// front: `Some(false)`, which holds even when the whole scene is made two-sided (an
+    /// emitter that must stay one-sided under `--two-sided`); None: as the scene says
+    /// ([`SceneDesc::two_sided`]).
+    pub two_sided: Option<bool>,
     /// Where it was defined.
     pub loc: Option<Location>,
 }
@@ -149,7 +152,7 @@ pub struct MaterialDesc {
 impl MaterialDesc {
     /// A non-emitting material.
     pub fn diffuse(name: &str, reflectance: Rgb) -> Self {
-        MaterialDesc { name: name.into(), reflectance, emission: Rgb::ZERO, two_sided: false, loc: None }
+        MaterialDesc { name: name.into(), reflectance, emission: Rgb::ZERO, two_sided: None, loc: None }
     }
 }
 

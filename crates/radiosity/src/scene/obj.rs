@@ -238,7 +238,7 @@ pub fn parse_mtl(text: &str, file: &Path) -> Result<Vec<MaterialDesc>> {
                 name: rest.join(" "),
                 reflectance: Rgb::ZERO,
                 emission: Rgb::ZERO,
-                two_sided: false,
+                two_sided: None,
                 loc: Some(loc),
             });
             continue;

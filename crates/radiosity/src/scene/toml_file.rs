@@ -15,7 +15,8 @@
 //! [materials.light]            # overrides of the mesh's material named `light`
 //! emission = [17, 12, 4]       # emitted radiance L_e (linear RGB; exitance is π·L_e)
 //! reflectance = [0, 0, 0]      # diffuse reflectance ρ in [0, 1)
-//! two_sided = true
+//! two_sided = false            # this material's choice wins over the scene's (and over
+//!                              # --two-sided): a lamp stays one-sided in a two-sided room
 //! ```
 //!
 //! Material names that are not bare TOML keys are quoted: `[materials."wall 1"]`. An
@@ -267,7 +268,7 @@ fn apply(m: &mut MaterialDesc, reflectance: Option<Rgb>, emission: Option<Rgb>, 
         m.emission = e;
     }
     if let Some(t) = two_sided {
-        m.two_sided = t;
+        m.two_sided = Some(t);
     }
     if reflectance.is_some() || emission.is_some() {
         // Later errors about this material's values point at the override.

@@ -74,7 +74,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
                 ),
             ));
         }
-        mats.push(Material { name: m.name.clone(), reflectance, emission: m.emission, two_sided: m.two_sided || two_sided });
+        mats.push(Material { name: m.name.clone(), reflectance, emission: m.emission, two_sided: m.two_sided.unwrap_or(two_sided) });
     }
     if !capped.is_empty() {
         warnings.push(Warning {

@@ -197,7 +197,7 @@ pub fn parse_vs3(text: &str, path: &Path) -> Result<(SceneDesc, Vs3Control)> {
             name: s.name.clone(),
             reflectance: Rgb::splat(rho),
             emission: Rgb::ZERO,
-            two_sided: false,
+            two_sided: None,
             loc: Some(s.loc.clone()),
         });
         let subs: Vec<&Surface> = surfaces.iter().filter(|t| t.base == s.number).collect();

@@ -36,7 +36,15 @@ pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
     };
     let record_every = (n / 16).max(1);
     let max_shots = mon.opts.max_iterations.saturating_mul(n.max(1));
-    let power = |i: usize, u: &[Rgb]| sys.area[i] * luminance(u[i]);
+    // Elements with no open area (wholly inside closed geometry) send no power, but other
+    // elements' rows may still gather from them (the inside of one box seen from inside
+    // another): for the choice of shooter and the stopping test they count as an element of
+    // typical area, or their unshot radiosity would never be passed on and progressive
+    // would differ from direct.
+    let open: Vec<f64> = sys.area.iter().copied().filter(|a| *a > 0.0).collect();
+    let typical = if open.is_empty() { 1.0 } else { open.iter().sum::<f64>() / open.len() as f64 };
+    let weight: Vec<f64> = sys.area.iter().map(|a| if *a > 0.0 { *a } else { typical }).collect();
+    let power = |i: usize, u: &[Rgb]| weight[i] * luminance(u[i]);
     let mut shots = 0usize;
     let mut residual;
     let stop = loop {

@@ -212,8 +212,11 @@ impl<'a> Shooter<'a> {
             let d = cosine_hemisphere(u1, u2);
             let dir = t * d.x + b * d.y + e.normal * d.z;
             let origin = x + e.normal * self.eps;
-            // A planar patch cannot be hit by a ray leaving its front side.
-            let receiver = match self.sys.rays.closest(origin.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch)) {
+            // A planar patch cannot be hit by a ray leaving its front side. Of a two-sided
+            // pair (two coincident copies) the copy facing the ray is hit: with plain
+            // `closest` the tie went to either, and two-sided scenes lost half their light
+            // into "escaped" (issue 9).
+            let receiver = match self.sys.rays.closest_facing(origin.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch)) {
                 Some((h, patch)) => {
                     let normal = mesh.elements[mesh.patches[patch as usize].first as usize].normal;
                     if normal.dot(dir) < 0.0 {
