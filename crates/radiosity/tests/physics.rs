@@ -165,17 +165,22 @@ fn cornell_box_factors_are_reciprocal_and_rows_at_most_one() {
     assert!(mean <= 0.05, "mean reciprocity error {mean}");
     // The open front lets light escape: the floor's area-weighted row sum against the
     // path-traced reference's 1 − escaped (Mitsuba, 4M rays per face, σ ≤ 2.5e-4). The
-    // reference samples the whole floor, covered parts under the blocks included, and we
-    // the open part: 1e-2 absolute.
+    // reference samples the whole floor, the parts under the blocks included (whose rays
+    // all hit the blocks' insides: nothing escapes from there); our rows are the open
+    // part's, so the reference's open-part value is (1 − escaped − c)/(1 − c) with c the
+    // covered fraction. Held to the ray-sampling target, 0.5 %.
     let text = std::fs::read_to_string(format!("{}/tests/data/cornell_view_factors_monte_carlo.json", env!("CARGO_MANIFEST_DIR"))).unwrap();
     let reference: serde_json::Value = serde_json::from_str(&text).unwrap();
     let floor = reference["faces"].as_array().unwrap().iter().position(|f| f == "floor").unwrap();
-    let expect = 1.0 - reference["escaped_through_open_front"][floor].as_f64().unwrap();
+    let whole = 1.0 - reference["escaped_through_open_front"][floor].as_f64().unwrap();
     let n = mesh.patches[0].count as usize;
     let (num, den) = (0..n).fold((0.0, 0.0), |(a, b), i| (a + area[i] * f.row_sum(i), b + area[i]));
+    let full: f64 = mesh.elements[..n].iter().map(|e| e.area).sum();
+    let covered = 1.0 - den / full;
+    let expect = (whole - covered) / (1.0 - covered);
     let mean = num / den;
-    eprintln!("floor row sum {mean:.5}, reference {expect:.5}");
-    assert!((mean - expect).abs() <= 1e-2, "floor row sum {mean:.5} vs reference {expect:.5}");
+    eprintln!("floor row sum {mean:.5}, reference {expect:.5} (whole floor {whole:.5}, covered {:.2} %)", 100.0 * covered);
+    assert!(((mean - expect) / expect).abs() <= 5e-3, "floor row sum {mean:.5} vs reference {expect:.5}");
 }
 
 /// Issue 9: one mesh and one F give one answer, whichever solver. The Cornell box at mesh
@@ -201,4 +206,29 @@ fn every_deterministic_solver_agrees_with_direct_on_cornell_at_mesh_size_50() {
         eprintln!("{} elements, {s}: max relative difference from direct {d:.2e}", mesh.len());
         assert!(d <= 1e-6, "{s}: max relative difference from direct {d:.3e}");
     }
+}
+
+/// Issue 9: light lost into the back of one-sided surfaces has its own energy term. A
+/// closed furnace room with one wall wound the wrong way: the other walls' light that
+/// reaches it lands on its back; the warning names that wall and suggests --two-sided.
+/// Two-sided, nothing is lost that way.
+#[test]
+fn back_faces_have_their_own_energy_term_and_a_warning() {
+    let mut d = builtin::furnace(0.5, 1.0);
+    let left = d.objects.iter().position(|o| o.name == "left").unwrap() as u32;
+    d.polygons.iter_mut().filter(|p| p.object == left).for_each(|p| p.vertices.reverse());
+    let settings = Settings { mesh_size: Some(0.1), ..Default::default() };
+    let solved = solve_scene(Scene::from_desc(d.clone()).unwrap(), &settings, &NoProgress).unwrap();
+    let e = &solved.solution.energy;
+    let frac = radiosity::luminance(e.back_faces) / radiosity::luminance(e.emitted);
+    eprintln!("back faces {:.2} %, escaped {:.2} %", 100.0 * frac, 100.0 * radiosity::luminance(e.escaped) / radiosity::luminance(e.emitted));
+    // Five walls' light reaching the sixth: about 5/6 × 0.2 of what the walls send.
+    assert!(frac > 0.10 && frac < 0.5, "back faces {frac}");
+    assert!(e.relative_imbalance() <= 1e-6, "imbalance {}", e.relative_imbalance());
+    let w = solved.warnings.iter().find(|w| w.contains("back faces")).expect("a back-face warning");
+    assert!(w.contains("'left'") && w.contains("--two-sided"), "{w}");
+    d.two_sided = true;
+    let solved = solve_scene(Scene::from_desc(d).unwrap(), &settings, &NoProgress).unwrap();
+    assert_eq!(solved.solution.energy.back_faces, Rgb::ZERO);
+    assert!(solved.warnings.iter().all(|w| !w.contains("back faces")));
 }

@@ -507,6 +507,10 @@ impl<'a, 'o> Monitor<'a, 'o> {
             if let Some(i) = b.iter().position(|x| !x.is_finite()) {
                 return Err(diverged(format!("element {i} has radiosity {}", b[i]), radiosity));
             }
+            let scale = if self.bound.is_finite() { self.bound } else { b.iter().fold(0.0f64, |m, x| m.max(x.abs().max_element())) };
+            if let Some(i) = b.iter().position(|x| x.min_element() < -1e-9 * scale) {
+                return Err(diverged(format!("element {i} has negative radiosity {}", b[i]), radiosity));
+            }
             if self.bound.is_finite() {
                 let (i, m) = b.iter().enumerate().fold((0, 0.0), |acc, (i, x)| if x.max_element() > acc.1 { (i, x.max_element()) } else { acc });
                 if m > self.bound * (1.0 + 1e-6) + 1e-300 {

@@ -475,3 +475,39 @@ fn locator_finds_the_element_of_points_on_every_patch() {
         }
     }
 }
+
+/// Issue 9: a system whose rows sum above 1 (what bad form factors gave on touching boxes)
+/// must stop with an error naming the cause, not run to 1e140 and return it.
+#[test]
+fn diverging_system_is_an_error_naming_the_cause() {
+    let rows = SparseRows::from_rows(vec![vec![(1, 1.5)], vec![(0, 1.5)]]);
+    let rho = vec![Rgb::splat(0.9); 2];
+    let e = vec![Rgb::ONE; 2];
+    let area = vec![1.0; 2];
+    let sys = System { transport: &rows, reflectance: &rho, emission: &e, area: &area };
+    for s in [Solver::Jacobi, Solver::GaussSeidel, Solver::Shooting, Solver::Progressive, Solver::Direct] {
+        match solve(s, &sys, &Options { max_iterations: 10_000, ..Default::default() }, &NoProgress) {
+            Err(Error::Diverged { why, elements, .. }) => {
+                eprintln!("{s}: {why}");
+                assert!(why.contains("bound") || why.contains("rose") || why.contains("residual is") || why.contains("negative"), "{s}: {why}");
+                assert!(!elements.is_empty(), "{s}: names the worst elements");
+            }
+            Err(e) => panic!("{s}: unexpected error {e}"),
+            Ok(sol) => panic!("{s}: returned a solution with residual {}", sol.stats.residual),
+        }
+    }
+}
+
+/// NaN or infinity never enters a solve unnoticed.
+#[test]
+fn non_finite_solver_input_is_refused() {
+    let rows = SparseRows::from_rows(vec![vec![(1, 0.5)], vec![(0, 0.5)]]);
+    let rho = vec![Rgb::splat(0.5); 2];
+    let area = vec![1.0; 2];
+    for bad in [f64::NAN, f64::INFINITY, -1.0] {
+        let e = vec![Rgb::ONE, Rgb::splat(bad)];
+        let sys = System { transport: &rows, reflectance: &rho, emission: &e, area: &area };
+        let err = solve(Solver::Jacobi, &sys, &Options::default(), &NoProgress).unwrap_err().to_string();
+        assert!(err.contains("emission of element 1"), "{err}");
+    }
+}
