@@ -110,7 +110,13 @@ impl Camera {
     /// a `"name"`), or an object `{"views": [...]}`. Unnamed views are called `view<k>`.
     pub fn load_views(path: &Path) -> Result<Vec<(String, Camera)>> {
         let text = super::read_input_text(path)?;
-        let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| Error::Input {
+        Camera::parse_views(&text, path)
+    }
+
+    /// Parses the text of a views file (see [`Camera::load_views`]); `path` names the
+    /// source in errors.
+    pub fn parse_views(text: &str, path: &Path) -> Result<Vec<(String, Camera)>> {
+        let v: serde_json::Value = serde_json::from_str(text).map_err(|e| Error::Input {
             loc: Location { file: path.into(), line: Some(e.line()), column: Some(e.column()) },
             msg: format!("invalid views JSON: {e}"),
         })?;

@@ -89,7 +89,9 @@ pub fn parse_vs3(text: &str, path: &Path) -> Result<(SceneDesc, Vs3Control)> {
         match cmd {
             '*' | 'E' => break 'lines,
             '/' => continue,
-            'T' => ctrl.title = line.trim_start()[first.len()..].trim().to_string(),
+            // The title is the rest of the line after the first word, which starts after the
+            // leading separators (not only whitespace: a leading ',' too).
+            'T' => ctrl.title = line.trim_start_matches([' ', '\t', ',', '\r'])[first.len()..].trim().to_string(),
             'C' => parse_control(rest, &loc, &mut ctrl, &mut warnings)?,
             'F' | 'G' => {
                 saw_geometry = true;
