@@ -55,7 +55,7 @@ fn obj_mesh_with_camera_and_overrides() {
     let light = d.materials.iter().find(|m| m.name == "light").unwrap();
     assert_eq!(light.emission, Rgb::new(1., 2., 3.));
     assert_eq!(light.reflectance, Rgb::new(0.1, 0.2, 0.3));
-    assert!(light.two_sided);
+    assert_eq!(light.two_sided, Some(true));
     let loc = light.loc.clone().unwrap();
     assert_eq!((loc.file.as_path(), loc.line), (p.as_path(), Some(10)));
     let c = d.camera.unwrap();
