@@ -85,6 +85,18 @@ impl Method {
         }
     }
 
+    /// How far above 1 a raw row may sum from the method's own error alone (its stated
+    /// accuracy: point sampling 0.5 %, the hemicube 1 %, rays and exact integration
+    /// rounding): rows beyond it are counted as corrected by the [`RowGuard`].
+    pub fn row_sum_slack(self) -> f64 {
+        match self {
+            Method::PointSampled => 5e-3,
+            Method::Hemicube => 1e-2,
+            Method::Adaptive => 1e-4,
+            Method::MonteCarlo | Method::Analytic => 1e-9,
+        }
+    }
+
     /// True for the methods that integrate over whole sender and receiver areas to their
     /// own accuracy (analytic, adaptive): these need no subdivision of the input polygons.
     pub fn is_area_to_area(self) -> bool {
@@ -199,7 +211,8 @@ pub struct Stats {
 /// non-finite and negative entries dropped, a sum above 1 scaled to 1 — and counted here.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct RowGuard {
-    /// Rows whose sum exceeded 1 + [`ROW_SUM_SLACK`] and were scaled to 1.
+    /// Rows whose sum exceeded 1 by more than the method's own tolerance
+    /// ([`Method::row_sum_slack`]); every row above 1 is scaled to 1, these are counted.
     pub rows_corrected: u64,
     /// Entries dropped because they were NaN, infinite or negative.
     pub entries_dropped: u64,
@@ -211,10 +224,11 @@ pub struct RowGuard {
     /// the geometry (e.g. `cube.obj:12`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub worst_source: Option<String>,
+    /// How far above 1 a row may be before it counts as corrected (the method's tolerance).
+    #[serde(skip)]
+    pub slack: f64,
 }
 
-/// Rows may exceed 1 by this much (rounding) before they count as corrected.
-pub const ROW_SUM_SLACK: f64 = 1e-9;
 
 impl RowGuard {
     /// Repairs row `i` in place (see the type's docs).
@@ -228,7 +242,7 @@ impl RowGuard {
             self.worst_row = Some(i);
         }
         if sum > 1.0 {
-            if sum > 1.0 + ROW_SUM_SLACK {
+            if sum > 1.0 + self.slack {
                 self.rows_corrected += 1;
             }
             for e in row.iter_mut() {
@@ -320,14 +334,14 @@ pub fn for_each_row(
     };
     let ctx = Context::new(scene, mesh, rays, receivers, opts);
     let (nonzeros, nrays, mut guard) = match opts.method {
-        Method::Hemicube => drive(&hemicube::Rows::new(&ctx), which, progress, sink)?,
+        Method::Hemicube => drive(&hemicube::Rows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?,
         Method::Analytic => {
             warn_occlusion(scene, progress, &mut warnings);
-            drive(&analytic_rows::Rows::new(&ctx), which, progress, sink)?
+            drive(&analytic_rows::Rows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?
         }
-        Method::PointSampled => drive(&point_sampled::Rows::new(&ctx), which, progress, sink)?,
-        Method::MonteCarlo => drive(&monte_carlo::Rows::new(&ctx), which, progress, sink)?,
-        Method::Adaptive => drive(&adaptive::Rows::new(&ctx), which, progress, sink)?,
+        Method::PointSampled => drive(&point_sampled::Rows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?,
+        Method::MonteCarlo => drive(&monte_carlo::Rows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?,
+        Method::Adaptive => drive(&adaptive::Rows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?,
     };
     if let Some(i) = guard.worst_row {
         guard.worst_source = mesh.elements.get(i).and_then(|e| scene.polygons[e.patch as usize].loc.as_ref()).map(|l| l.to_string());
@@ -373,9 +387,9 @@ pub fn for_each_polygon_row(
     let mut warnings = Vec::new();
     let (nonzeros, nrays, mut guard) = if opts.method == Method::Analytic {
         warn_occlusion(scene, progress, &mut warnings);
-        drive(&analytic_rows::PolygonRows::new(&ctx), which, progress, sink)?
+        drive(&analytic_rows::PolygonRows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?
     } else {
-        drive(&adaptive::PolygonRows::new(&ctx), which, progress, sink)?
+        drive(&adaptive::PolygonRows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?
     };
     if let Some(p) = guard.worst_row {
         guard.worst_source = scene.polygons.get(p).and_then(|p| p.loc.as_ref()).map(|l| l.to_string());
@@ -464,11 +478,12 @@ const BLOCK: usize = 256;
 fn drive<R: RowSource>(
     src: &R,
     which: &[u32],
+    slack: f64,
     progress: &dyn Progress,
     sink: &mut dyn FnMut(usize, &[(u32, f64)]) -> Result<()>,
 ) -> Result<(u64, u64, RowGuard)> {
     progress.begin("form factors", which.len() as u64);
-    let mut guard = RowGuard::default();
+    let mut guard = RowGuard { slack, ..Default::default() };
     let rays = AtomicU64::new(0);
     let stopped = AtomicBool::new(false);
     let mut nonzeros = 0u64;
