@@ -93,7 +93,7 @@ pub fn split_escaped(
                 }
             }
             let f = 1.0 / PROBES as f64;
-            (power * (back as f64 * f), power * ((back + miss) as f64 * f), hits.into_iter().map(|(o, c)| (o, c)).collect())
+            (power * (back as f64 * f), power * ((back + miss) as f64 * f), hits)
         })
         .collect();
     out.rays = PROBES as u64 * mesh.len() as u64;

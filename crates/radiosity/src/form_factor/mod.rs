@@ -251,17 +251,6 @@ impl RowGuard {
         }
     }
 
-    /// Adds another guard's counts.
-    pub fn merge(&mut self, o: &RowGuard) {
-        self.rows_corrected += o.rows_corrected;
-        self.entries_dropped += o.entries_dropped;
-        if o.max_row_sum > self.max_row_sum || self.worst_row.is_none() {
-            self.max_row_sum = o.max_row_sum;
-            self.worst_row = o.worst_row;
-            self.worst_source = o.worst_source.clone();
-        }
-    }
-
     /// A warning for the user when something was corrected.
     pub fn warning(&self) -> Option<String> {
         if self.rows_corrected == 0 && self.entries_dropped == 0 {

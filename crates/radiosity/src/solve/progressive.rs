@@ -41,8 +41,8 @@ pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
     // another): for the choice of shooter and the stopping test they count as an element of
     // typical area, or their unshot radiosity would never be passed on and progressive
     // would differ from direct.
-    let open: Vec<f64> = sys.area.iter().copied().filter(|a| *a > 0.0).collect();
-    let typical = if open.is_empty() { 1.0 } else { open.iter().sum::<f64>() / open.len() as f64 };
+    let (sum, count) = sys.area.iter().filter(|a| **a > 0.0).fold((0.0, 0usize), |(s, c), a| (s + a, c + 1));
+    let typical = if count == 0 { 1.0 } else { sum / count as f64 };
     let weight: Vec<f64> = sys.area.iter().map(|a| if *a > 0.0 { *a } else { typical }).collect();
     let power = |i: usize, u: &[Rgb]| weight[i] * luminance(u[i]);
     let mut shots = 0usize;
