@@ -268,7 +268,8 @@ impl Prepared {
             None => None,
         };
         let result = if solver.is_stochastic() {
-            let sys = RaySystem { mesh, rays: &self.rays, reflectance: &self.reflectance, emission: &self.emission };
+            let area = RaySystem::participating_areas(mesh, &self.receivers);
+            let sys = RaySystem { mesh, rays: &self.rays, reflectance: &self.reflectance, emission: &self.emission, receivers: &self.receivers, area: &area };
             solve::stochastic::solve(solver, &sys, opts, progress, observer)
         } else {
             let transport = self.transport.as_ref().ok_or_else(|| Error::Invalid("solve without form factors".into()))?;

@@ -220,34 +220,34 @@ pub fn check_furnace(name: &str, scene: Scene, method: Method, mesh_size: f64) {
         t.elapsed().as_secs_f64()
     );
     for run in &cmp.runs {
-        if model && run.solver.is_stochastic() {
-            // Known limit (docs/RELIABILITY.md): the stochastic solvers divide the power that
-            // lands on a partly covered element by its open area, and inside a real model
-            // rays also land on covered parts (office2: one object's mean 3.5 % above the
-            // bound). Held on the synthetic furnaces above, not here.
-            eprintln!("{name} {}: {} not held to the bound inside a real model (known limit)", method.name(), run.solver);
-            continue;
-        }
         let sol = run.outcome.as_ref().unwrap_or_else(|e| panic!("{name} {} {}: {e}", method.name(), run.solver));
         let b = &sol.radiosity;
         if run.solver.is_stochastic() {
             // Per-element estimates carry ray noise (a 0.5 mm slab edge gets a handful of
-            // rays): the bound is held by every object's area-weighted mean.
+            // rays): the bound is held by every object's area-weighted mean of its open
+            // area, within 1 % plus four standard deviations of its ray estimate. In a
+            // furnace every ray lands, so an object with open area A_o of A in all gets
+            // about R·A_o/A of the R rays per iteration, and the half of B that is
+            // reflected carries their relative noise 1/√hits.
+            let open = cmp.solved.receivers.open_areas(&cmp.solved.mesh);
+            let total: f64 = open.iter().sum();
+            let rays = s.solve.rays.unwrap() as f64;
             let mut sums = vec![(0.0, 0.0); cmp.solved.scene.objects.len()];
             for (i, e) in cmp.solved.mesh.elements.iter().enumerate() {
                 let o = cmp.solved.scene.polygons[e.patch as usize].object as usize;
-                sums[o].0 += e.area * b[i].max_element();
-                sums[o].1 += e.area;
+                sums[o].0 += open[i] * b[i].max_element();
+                sums[o].1 += open[i];
             }
-            // The method's tolerance: 1 %, or three times the solver's own error estimate.
-            let tol = 0.01f64.max(3.0 * sol.stats.error_estimate.unwrap_or(0.0));
             for (o, (num, den)) in sums.iter().enumerate().filter(|x| x.1 .1 > 0.0) {
                 let mean = num / den;
+                let sigma = 0.5 / (rays * den / total).sqrt();
+                let tol = 0.01 + 4.0 * sigma;
                 assert!(
                     mean <= exact * (1.0 + tol),
-                    "{name} {} {}: object {o} mean B {mean} above the bound {exact} (tolerance {tol:.4})",
+                    "{name} {} {}: object {o} ({}) mean B {mean} above the bound {exact} (tolerance {tol:.4})",
                     method.name(),
-                    run.solver
+                    run.solver,
+                    cmp.solved.scene.objects[o].name
                 );
             }
         } else {
@@ -274,8 +274,15 @@ pub fn check_furnace(name: &str, scene: Scene, method: Method, mesh_size: f64) {
                 den += mesh.elements[i].area;
             }
             let off = (num / den / exact - 1.0).abs();
+            // Known limit (docs/RELIABILITY.md): the furnace room's walls around a real
+            // model see only the back of the model's inward-wound walls, so the coverage
+            // test calls most of them covered; the stochastic solvers send and receive
+            // through open cells only, and the walls' partly covered elements lose the
+            // light of their covered cells (office2: up to 1.1 % low). Held to 2 %.
+            let room_wall = model && cmp.solved.scene.objects[cmp.solved.scene.polygons[pi as usize].object as usize].name == "furnace-room";
+            let allowed = if run.solver.is_stochastic() && room_wall { 0.02 } else { 0.01 };
             assert!(
-                off <= 0.01,
+                off <= allowed,
                 "{name} {} {}: free surface {} is {:.3} % off 2π",
                 method.name(),
                 run.solver,

@@ -33,6 +33,7 @@ pub const MAX_K: usize = 3;
 
 /// Grid used to measure the open fraction of elements that a contact edge crosses.
 pub const FINE_K: usize = 8;
+const _: () = assert!(FINE_K * FINE_K == 64, "open cells are one u64 per element");
 
 /// Fixed receiver points of every element and which of them are open.
 #[derive(Clone, Debug, Default)]
@@ -40,8 +41,13 @@ pub struct Receivers {
     /// Per element, for k = 1..=MAX_K: the open points of the k × k grid (k = 1: the open
     /// point nearest to the centroid of the open 3×3 points).
     points: Vec<[Vec<DVec3>; MAX_K]>,
-    /// Per element, the open fraction of its area (estimated on the 3 × 3 grid).
+    /// Per element, the open fraction of its area (estimated on the 3 × 3 grid, or on the
+    /// [`FINE_K`] × [`FINE_K`] grid where a contact edge crosses the element).
     pub open_fraction: Vec<f64>,
+    /// Per element, which cells of the [`FINE_K`] × [`FINE_K`] grid of its parameter
+    /// domain are open (bit `j·FINE_K + i` for the cell `i` along u, `j` along v): the
+    /// fine grid's result where it was probed, else all cells or none.
+    pub open_cells: Vec<u64>,
     /// Probe rays cast.
     pub rays: u64,
 }
@@ -73,13 +79,34 @@ impl Receivers {
                 lv
             })
             .collect();
-        Receivers { points, open_fraction: vec![1.0; mesh.len()], rays: 0 }
+        Receivers { points, open_fraction: vec![1.0; mesh.len()], open_cells: vec![u64::MAX; mesh.len()], rays: 0 }
+    }
+
+    /// True if the point of element `e` at (u, v) lies in an open cell.
+    #[inline]
+    pub fn open_at(&self, e: usize, u: f64, v: f64) -> bool {
+        let m = self.open_cells[e];
+        m == u64::MAX || m & (1u64 << cell(u, v)) != 0
+    }
+
+    /// The open cell of element `e` numbered `k` among its open cells (0 ≤ k < the number
+    /// of open cells) as the (u, v) of its lower corner; None if no cell is open.
+    pub fn open_cell(&self, e: usize, k: u32) -> Option<(f64, f64)> {
+        let mut m = self.open_cells[e];
+        if m == 0 {
+            return None;
+        }
+        for _ in 0..k.min(m.count_ones() - 1) {
+            m &= m - 1;
+        }
+        let b = m.trailing_zeros() as usize;
+        Some(((b % FINE_K) as f64 / FINE_K as f64, (b / FINE_K) as f64 / FINE_K as f64))
     }
 
     /// Receivers with the coverage test.
     pub fn compute(scene: &Scene, mesh: &Mesh, rays: &SceneRays) -> Receivers {
         let diag = scene.diagonal().max(f64::MIN_POSITIVE);
-        let res: Vec<([Vec<DVec3>; MAX_K], f64)> = mesh
+        let res: Vec<([Vec<DVec3>; MAX_K], f64, u64)> = mesh
             .elements
             .par_iter()
             .with_min_len(16)
@@ -112,13 +139,21 @@ impl Receivers {
                 let (corners, nc) = e.corners(&mesh.positions);
                 let corner_covered = open3 == n3
                     && corners[..nc].iter().any(|c| covered(*c + (e.centroid - *c) * 0.02, e.normal, e.patch, scene, rays, diag));
+                let mut cells = if open3 == 0 { 0 } else { u64::MAX };
                 if open3 > 0 && (open3 < n3 || corner_covered) {
                     let fine = grid(e, &mesh.positions, FINE_K);
-                    let open: Vec<DVec3> =
-                        fine.iter().copied().filter(|p| !covered(*p, e.normal, e.patch, scene, rays, diag)).collect();
+                    let mut mask = 0u64;
+                    let mut open = Vec::new();
+                    for (b, p) in fine.iter().enumerate() {
+                        if !covered(*p, e.normal, e.patch, scene, rays, diag) {
+                            mask |= 1 << b;
+                            open.push(*p);
+                        }
+                    }
                     if !open.is_empty() {
                         frac = open.len() as f64 / fine.len() as f64;
                         lv[MAX_K - 1] = open;
+                        cells = mask;
                     }
                 }
                 // k = 1: the centroid when the whole element is open, else the open point
@@ -151,14 +186,30 @@ impl Receivers {
                     }
                     lv[0] = vec![e.centroid];
                 }
-                (lv, frac)
+                (lv, frac, cells)
             })
             .collect();
-        let (points, open_fraction): (Vec<_>, Vec<f64>) = res.into_iter().unzip();
+        let mut points = Vec::with_capacity(res.len());
+        let mut open_fraction = Vec::with_capacity(res.len());
+        let mut open_cells = Vec::with_capacity(res.len());
+        for (p, f, c) in res {
+            points.push(p);
+            open_fraction.push(f);
+            open_cells.push(c);
+        }
         let mixed = open_fraction.iter().filter(|f| **f > 0.0 && **f < 1.0).count() as u64;
         let rays = PROBES as u64 * ((1 + 4 + 9 + 4) * mesh.len() as u64 + (FINE_K * FINE_K) as u64 * mixed);
-        Receivers { points, open_fraction, rays }
+        Receivers { points, open_fraction, open_cells, rays }
     }
+}
+
+/// The [`FINE_K`] × [`FINE_K`] cell of (u, v).
+#[inline]
+fn cell(u: f64, v: f64) -> u32 {
+    let k = FINE_K as f64;
+    let i = ((u * k) as usize).min(FINE_K - 1);
+    let j = ((v * k) as usize).min(FINE_K - 1);
+    (j * FINE_K + i) as u32
 }
 
 /// Midpoints of the k × k grid in the element's parameter domain.

@@ -10,12 +10,14 @@
 //! The target element size is in scene units; [`default_size`] scales with the scene.
 
 pub mod coverage;
+pub mod locate;
 pub mod adaptive;
 mod uniform;
 
 use glam::DVec3;
 
-pub use coverage::Receivers;
+pub use coverage::{Receivers, FINE_K};
+pub use locate::Locator;
 pub use uniform::{count_uniform, mesh_uniform, mesh_uniform_with};
 
 use crate::scene::Scene;
@@ -74,6 +76,41 @@ impl Element {
         } else {
             let su = u.sqrt();
             c[0] * (1.0 - su) + c[1] * (su * (1.0 - v)) + c[2] * (su * v)
+        }
+    }
+
+    /// The (u, v) ∈ [0,1]² of a point on (or projected onto) the element: the inverse of
+    /// [`Element::point`] (barycentric for triangles, a few Gauss–Newton steps of the
+    /// bilinear map for quads), clamped to the domain.
+    pub fn parameters(&self, positions: &[DVec3], x: DVec3) -> (f64, f64) {
+        let (c, n) = self.corners(positions);
+        if n == 4 {
+            let (mut u, mut v) = (0.5, 0.5);
+            for _ in 0..6 {
+                let p = self.point(positions, u, v);
+                let du = (c[1] - c[0]) * (1.0 - v) + (c[2] - c[3]) * v;
+                let dv = c[3].lerp(c[2], u) - c[0].lerp(c[1], u);
+                let r = x - p;
+                let (a, b, d) = (du.dot(du), du.dot(dv), dv.dot(dv));
+                let det = a * d - b * b;
+                if det.abs() <= f64::MIN_POSITIVE {
+                    break;
+                }
+                let (gu, gv) = (du.dot(r), dv.dot(r));
+                u = (u + (d * gu - b * gv) / det).clamp(0.0, 1.0);
+                v = (v + (a * gv - b * gu) / det).clamp(0.0, 1.0);
+            }
+            (u, v)
+        } else {
+            let (e1, e2, r) = (c[1] - c[0], c[2] - c[0], x - c[0]);
+            let (a, b, d) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+            let det = (a * d - b * b).max(f64::MIN_POSITIVE);
+            let (g1, g2) = (e1.dot(r), e2.dot(r));
+            let b1 = ((d * g1 - b * g2) / det).max(0.0);
+            let b2 = ((a * g2 - b * g1) / det).max(0.0);
+            let su = (b1 + b2).min(1.0);
+            let v = if su > 0.0 { (b2 / (b1 + b2)).clamp(0.0, 1.0) } else { 0.5 };
+            (su * su, v)
         }
     }
 }

@@ -272,6 +272,42 @@ mod tests {
         assert_eq!(floor.count, 12 * 12);
     }
 
+    #[test]
+    fn parameters_invert_point_on_triangles_and_non_parallelogram_quads() {
+        let positions = vec![
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(1.5, 1.2, 0.0),
+            DVec3::new(-0.3, 0.9, 0.0),
+        ];
+        let quad = super::super::Element { vertices: [0, 1, 2, 3], patch: 0, area: 1.0, centroid: DVec3::ZERO, normal: DVec3::Z };
+        let tri = super::super::Element { vertices: [0, 1, 2, NO_VERTEX], ..quad };
+        for e in [quad, tri] {
+            for (u, v) in [(0.1, 0.2), (0.5, 0.5), (0.93, 0.07), (0.3, 0.99)] {
+                let x = e.point(&positions, u, v);
+                let (pu, pv) = e.parameters(&positions, x);
+                assert!((pu - u).abs() < 1e-9 && (pv - v).abs() < 1e-9, "{:?}: ({u}, {v}) came back as ({pu}, {pv})", e.vertices);
+            }
+        }
+    }
+
+    #[test]
+    fn open_cells_are_found_where_they_lie() {
+        let scene = Scene::from_desc(builtin::cornell()).unwrap();
+        let mesh = mesh_uniform(&scene, 200.0);
+        let mut r = crate::mesh::Receivers::all_open(&mesh);
+        // Element 0: only the cells with i < 4 (u < 1/2) and j = 7 (v ≥ 7/8) open.
+        r.open_cells[0] = (0..4).map(|i| 1u64 << (7 * 8 + i)).sum();
+        assert!(r.open_at(0, 0.1, 0.9) && r.open_at(0, 0.49, 0.999));
+        assert!(!r.open_at(0, 0.51, 0.9) && !r.open_at(0, 0.1, 0.8));
+        assert!(r.open_at(1, 0.7, 0.2), "an element with no covered cell is open everywhere");
+        for k in 0..4 {
+            assert_eq!(r.open_cell(0, k), Some((k as f64 / 8.0, 7.0 / 8.0)));
+        }
+        r.open_cells[0] = 0;
+        assert_eq!(r.open_cell(0, 0), None);
+    }
+
     /// Stops once `after` units of progress were reported; counts them.
     struct StopAfter {
         after: u64,

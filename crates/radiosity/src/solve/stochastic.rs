@@ -28,13 +28,13 @@
 
 use std::borrow::Cow;
 
-use glam::{DVec2, DVec3};
+use glam::DVec3;
 use rand::RngExt;
 use rayon::prelude::*;
 
 use super::{EnergyBalance, Monitor, Observer, Options, Solution, Solver};
 use crate::accel::SceneRays;
-use crate::mesh::Mesh;
+use crate::mesh::{Locator, Mesh, Receivers, FINE_K};
 use crate::sampling::{basis, cosine_hemisphere, mix64, rng_for};
 use crate::{luminance, Error, Progress, Result, Rgb};
 
@@ -46,7 +46,8 @@ pub const BATCH: u64 = 1024;
 const GROUP: u64 = 64;
 
 /// What the stochastic solvers work on: the elements, ray casting against the scene's
-/// polygons (whose indices are the mesh's patches), and the materials.
+/// polygons (whose indices are the mesh's patches), the materials, and which part of every
+/// element is open (not inside closed geometry).
 pub struct RaySystem<'a> {
     /// The elements.
     pub mesh: &'a Mesh,
@@ -56,6 +57,11 @@ pub struct RaySystem<'a> {
     pub reflectance: &'a [Rgb],
     /// Emitted exitance E = π·L_e per element.
     pub emission: &'a [Rgb],
+    /// The coverage test's result ([`Receivers::all_open`] where there is none).
+    pub receivers: &'a Receivers,
+    /// Area per element over which it sends and receives
+    /// ([`RaySystem::participating_areas`]).
+    pub area: &'a [f64],
 }
 
 impl RaySystem<'_> {
@@ -67,11 +73,26 @@ impl RaySystem<'_> {
     pub fn is_empty(&self) -> bool {
         self.emission.is_empty()
     }
-    /// Element areas.
-    pub fn areas(&self) -> Vec<f64> {
-        self.mesh.elements.iter().map(|e| e.area).collect()
+    /// The area over which every element sends and receives: its open area where it has
+    /// one, else (wholly covered, by the coverage test inside closed geometry) its whole
+    /// area. A partly covered element takes part through its open cells only (see
+    /// [`Shooter::distribute`]). A wholly covered one takes part in full, as its gathered
+    /// row does in the deterministic system: it is either the inside of a closed cavity, or
+    /// a surface that faces back faces only (the outside of a room wound inwards), and in
+    /// both cases what it exchanges is light like any other.
+    pub fn participating_areas(mesh: &Mesh, receivers: &Receivers) -> Vec<f64> {
+        mesh.elements.iter().zip(&receivers.open_fraction).map(|(e, f)| if *f > 0.0 { e.area * f } else { e.area }).collect()
+    }
+
+    /// What the power `arrived` at element `i` does: `(ΔB, absorbed)`.
+    pub(crate) fn receive(&self, i: usize, arrived: Rgb) -> (Rgb, Rgb) {
+        let rho = self.reflectance[i];
+        (rho * arrived / self.area[i].max(f64::MIN_POSITIVE), (Rgb::ONE - rho) * arrived)
     }
 }
+
+/// Receiver code of a ray that landed on a covered cell of a partly covered element.
+const COVERED: u32 = u32::MAX - 1;
 
 /// The default rays per iteration for `n` elements: 500 per element, at least 200 000.
 pub fn default_rays(n: usize) -> u64 {
@@ -87,7 +108,7 @@ pub fn solve(
     observer: Option<&mut Observer<'_>>,
 ) -> Result<Solution> {
     let n = sys.len();
-    if sys.mesh.len() != n || sys.reflectance.len() != n {
+    if sys.mesh.len() != n || sys.reflectance.len() != n || sys.area.len() != n || sys.receivers.open_cells.len() != n {
         return Err(Error::Invalid("stochastic solve: system sizes disagree".into()));
     }
     let mut mon = Monitor::new(solver, opts, progress, observer);
@@ -181,7 +202,7 @@ impl<'a> Shooter<'a> {
             for batch in hits {
                 for (sender, receiver) in batch {
                     let w = ray_power[sender as usize];
-                    if receiver == u32::MAX {
+                    if receiver >= COVERED {
                         escaped += w;
                     } else {
                         received[receiver as usize] += w;
@@ -198,6 +219,7 @@ impl<'a> Shooter<'a> {
         let mesh = self.sys.mesh;
         let (start, end) = (k * BATCH, ((k + 1) * BATCH).min(total));
         let mut rng = rng_for(stream_seed, k);
+        let recv = self.sys.receivers;
         let mut out = Vec::with_capacity((end - start) as usize);
         // The element owning ray `start`.
         let mut j = first.partition_point(|&f| f <= start) - 1;
@@ -206,7 +228,18 @@ impl<'a> Shooter<'a> {
                 j += 1;
             }
             let e = &mesh.elements[j];
-            let (u, v, u1, u2): (f64, f64, f64, f64) = (rng.random(), rng.random(), rng.random(), rng.random());
+            let (mut u, mut v, u1, u2): (f64, f64, f64, f64) = (rng.random(), rng.random(), rng.random(), rng.random());
+            // A partly covered element sends from its open cells only, in proportion to
+            // their (equal) areas: sent from its whole area, the covered part poured power
+            // into the inside of the solid it touches (issue 9).
+            let cells = recv.open_cells[j];
+            if cells != u64::MAX {
+                let k = (rng.random::<f64>() * cells.count_ones() as f64) as u32;
+                if let Some((u0, v0)) = recv.open_cell(j, k) {
+                    u = u0 + u / FINE_K as f64;
+                    v = v0 + v / FINE_K as f64;
+                }
+            }
             let x = e.point(&mesh.positions, u, v);
             let (t, b) = basis(e.normal);
             let d = cosine_hemisphere(u1, u2);
@@ -220,7 +253,19 @@ impl<'a> Shooter<'a> {
                 Some((h, patch)) => {
                     let normal = mesh.elements[mesh.patches[patch as usize].first as usize].normal;
                     if normal.dot(dir) < 0.0 {
-                        self.locator.locate(mesh, patch, origin + dir * h.t as f64)
+                        let hit = origin + dir * h.t as f64;
+                        let r = self.locator.locate(mesh, patch, hit);
+                        let cells = recv.open_cells.get(r as usize).copied().unwrap_or(u64::MAX);
+                        if cells != u64::MAX && cells != 0 && {
+                            let (hu, hv) = mesh.elements[r as usize].parameters(&mesh.positions, hit);
+                            !recv.open_at(r as usize, hu, hv)
+                        } {
+                            // Landed on the covered part of an element whose radiosity is
+                            // that of its open part: lost, as in the deterministic books.
+                            COVERED
+                        } else {
+                            r
+                        }
                     } else {
                         u32::MAX
                     }
@@ -233,134 +278,6 @@ impl<'a> Shooter<'a> {
     }
 }
 
-/// Finds the element of a patch that contains a point on the patch: a uniform grid per
-/// patch in the patch's plane, each cell listing the elements whose bounds overlap it, and
-/// a point-in-convex-polygon test (the least violated element wins, for points on edges).
-pub(crate) struct Locator {
-    patches: Vec<PatchGrid>,
-    /// Per element, its edges in its patch's plane: outward unit normal and offset, so
-    /// that `normal·q − offset` is the distance of q outside the edge (unused edges of
-    /// triangles repeat the first).
-    edges: Vec<[(DVec2, f64); 4]>,
-}
-
-struct PatchGrid {
-    origin: DVec3,
-    axes: (DVec3, DVec3),
-    lo: DVec2,
-    inv_cell: DVec2,
-    nx: usize,
-    ny: usize,
-    /// Cell c lists `items[cell_start[c]..cell_start[c + 1]]`.
-    cell_start: Vec<u32>,
-    items: Vec<u32>,
-}
-
-impl Locator {
-    pub(crate) fn new(mesh: &Mesh) -> Self {
-        let mut edges = vec![[(DVec2::ZERO, 0.0); 4]; mesh.len()];
-        let patches = mesh
-            .patches
-            .iter()
-            .map(|pe| {
-                let elems = pe.first..pe.first + pe.count;
-                let Some(e0) = mesh.elements.get(pe.first as usize) else {
-                    return PatchGrid { origin: DVec3::ZERO, axes: (DVec3::X, DVec3::Y), lo: DVec2::ZERO, inv_cell: DVec2::ONE, nx: 1, ny: 1, cell_start: vec![0, 0], items: Vec::new() };
-                };
-                let origin = mesh.positions[e0.vertices[0] as usize];
-                let axes = basis(e0.normal);
-                let to2 = |p: DVec3| DVec2::new((p - origin).dot(axes.0), (p - origin).dot(axes.1));
-                let bounds: Vec<(DVec2, DVec2)> = elems
-                    .clone()
-                    .map(|k| {
-                        let (c, n) = mesh.elements[k as usize].corners(&mesh.positions);
-                        c[..n].iter().fold((DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)), |(lo, hi), p| {
-                            (lo.min(to2(*p)), hi.max(to2(*p)))
-                        })
-                    })
-                    .collect();
-                for k in elems.clone() {
-                    let (c, n) = mesh.elements[k as usize].corners(&mesh.positions);
-                    let v = c.map(to2);
-                    // Signed area decides the orientation in this projection.
-                    let s = (0..n).map(|i| v[i].perp_dot(v[(i + 1) % n])).sum::<f64>().signum();
-                    let mut out = [(DVec2::ZERO, 0.0); 4];
-                    for i in 0..4 {
-                        let (a, b) = (v[i % n], v[(i + 1) % n]);
-                        let e = b - a;
-                        let normal = DVec2::new(e.y, -e.x) * s / e.length().max(1e-300);
-                        out[i] = (normal, normal.dot(a));
-                    }
-                    if n == 3 {
-                        out[3] = out[0];
-                    }
-                    edges[k as usize] = out;
-                }
-                let lo = bounds.iter().fold(DVec2::splat(f64::INFINITY), |m, b| m.min(b.0));
-                let hi = bounds.iter().fold(DVec2::splat(f64::NEG_INFINITY), |m, b| m.max(b.1));
-                let size = (hi - lo).max(DVec2::splat(1e-300));
-                let count = pe.count.max(1) as f64;
-                let nx = ((count * size.x / size.y).sqrt().ceil() as usize).clamp(1, 1024);
-                let ny = ((count / nx as f64).ceil() as usize).clamp(1, 1024);
-                let inv_cell = DVec2::new(nx as f64 / size.x, ny as f64 / size.y);
-                let cell_of = |p: DVec2| {
-                    let c = (p - lo) * inv_cell;
-                    ((c.x.max(0.0) as usize).min(nx - 1), (c.y.max(0.0) as usize).min(ny - 1))
-                };
-                let mut lists: Vec<Vec<u32>> = vec![Vec::new(); nx * ny];
-                for (k, b) in elems.zip(&bounds) {
-                    let (x0, y0) = cell_of(b.0);
-                    let (x1, y1) = cell_of(b.1);
-                    for y in y0..=y1 {
-                        for x in x0..=x1 {
-                            lists[y * nx + x].push(k);
-                        }
-                    }
-                }
-                let mut cell_start = Vec::with_capacity(nx * ny + 1);
-                let mut items = Vec::new();
-                cell_start.push(0);
-                for l in lists {
-                    items.extend(l);
-                    cell_start.push(items.len() as u32);
-                }
-                PatchGrid { origin, axes, lo, inv_cell, nx, ny, cell_start, items }
-            })
-            .collect();
-        Locator { patches, edges }
-    }
-
-    /// The element of `patch` containing `p` (or the nearest, for points a rounding error
-    /// outside every element).
-    pub(crate) fn locate(&self, mesh: &Mesh, patch: u32, p: DVec3) -> u32 {
-        let g = &self.patches[patch as usize];
-        let to2 = |q: DVec3| DVec2::new((q - g.origin).dot(g.axes.0), (q - g.origin).dot(g.axes.1));
-        let q = to2(p);
-        let c = (q - g.lo) * g.inv_cell;
-        let (x, y) = ((c.x.max(0.0) as usize).min(g.nx - 1), (c.y.max(0.0) as usize).min(g.ny - 1));
-        let cell = y * g.nx + x;
-        let candidates = &g.items[g.cell_start[cell] as usize..g.cell_start[cell + 1] as usize];
-        let pe = mesh.patches[patch as usize];
-        let all: Vec<u32>;
-        let candidates = if candidates.is_empty() {
-            all = (pe.first..pe.first + pe.count).collect();
-            &all[..]
-        } else {
-            candidates
-        };
-        let mut best = (f64::INFINITY, candidates[0]);
-        for &k in candidates {
-            let worst = self.edges[k as usize].iter().map(|(n, c)| n.dot(q) - c).fold(f64::NEG_INFINITY, f64::max);
-            if worst <= 0.0 {
-                return k;
-            }
-            if worst < best.0 {
-                best = (worst, k);
-            }
-        }
-        best.1
-    }
-}
 
 /// One independent chain of a stochastic solver.
 #[derive(Clone, Debug)]
@@ -436,9 +353,9 @@ pub(crate) fn finish(
     residual: f64,
     stop: super::StopReason,
 ) -> Solution {
-    let area = sys.areas();
+    let area = sys.area;
     let b = mean(reps);
-    let err = error_estimate(reps, &area, &b);
-    let energy = energy(reps, sys.emission, &area);
+    let err = error_estimate(reps, area, &b);
+    let energy = energy(reps, sys.emission, area);
     Solution { radiosity: b, ambient: None, energy, stats: mon.finish(iterations, residual, stop, Some(err)) }
 }

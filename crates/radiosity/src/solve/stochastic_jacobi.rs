@@ -21,11 +21,11 @@ use crate::{luminance, Result, Rgb};
 
 pub(super) fn solve(sys: &RaySystem, mon: &mut Monitor) -> Result<Solution> {
     let n = sys.len();
-    let area = sys.areas();
+    let area = sys.area;
     let shooter = Shooter::new(sys, mon.opts.seed);
     let rays = mon.opts.rays.unwrap_or_else(|| default_rays(n));
     let per_replica = (rays / REPLICAS as u64).max(1);
-    let emitted_power: Rgb = sys.emission.iter().zip(&area).map(|(e, a)| *e * *a).sum();
+    let emitted_power: Rgb = sys.emission.iter().zip(area).map(|(e, a)| *e * *a).sum();
     let emitted = luminance(emitted_power).max(f64::MIN_POSITIVE);
     // B⁽⁰⁾ = E with "last increment" E: nothing has been passed on yet.
     let mut reps = vec![Replica::new(sys.emission); REPLICAS];
@@ -46,7 +46,7 @@ pub(super) fn solve(sys: &RaySystem, mon: &mut Monitor) -> Result<Solution> {
         }
         let mut deposits = Vec::with_capacity(REPLICAS);
         for (r, rep) in reps.iter().enumerate() {
-            let power: Vec<Rgb> = rep.b.iter().zip(&area).map(|(b, a)| *b * *a).collect();
+            let power: Vec<Rgb> = rep.b.iter().zip(area).map(|(b, a)| *b * *a).collect();
             let fraction = power.iter().map(|p| luminance(*p)).sum::<f64>() / emitted;
             let count = ((per_replica as f64 * fraction).ceil() as u64).max(1);
             let stopper = || mon.interrupted().is_some();
@@ -62,10 +62,9 @@ pub(super) fn solve(sys: &RaySystem, mon: &mut Monitor) -> Result<Solution> {
             rep.absorbed = Rgb::ZERO;
             let mut change = Rgb::ZERO;
             for i in 0..n {
-                let arrived = d.received[i];
-                let rho = sys.reflectance[i];
-                rep.absorbed += (Rgb::ONE - rho) * arrived;
-                let new = sys.emission[i] + rho * arrived / area[i];
+                let (reflected, absorbed) = sys.receive(i, d.received[i]);
+                rep.absorbed += absorbed;
+                let new = sys.emission[i] + reflected;
                 rep.unshot[i] = new - rep.b[i];
                 change += rep.unshot[i] * area[i];
                 rep.b[i] = new;

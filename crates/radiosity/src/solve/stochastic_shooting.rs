@@ -19,14 +19,14 @@ use crate::{luminance, Result, Rgb};
 
 pub(super) fn solve(sys: &RaySystem, mon: &mut Monitor) -> Result<Solution> {
     let n = sys.len();
-    let area = sys.areas();
+    let area = sys.area;
     let shooter = Shooter::new(sys, mon.opts.seed);
     let rays = mon.opts.rays.unwrap_or_else(|| default_rays(n));
     let per_replica = (rays / REPLICAS as u64).max(1);
-    let emitted_power: Rgb = sys.emission.iter().zip(&area).map(|(e, a)| *e * *a).sum();
+    let emitted_power: Rgb = sys.emission.iter().zip(area).map(|(e, a)| *e * *a).sum();
     let emitted = luminance(emitted_power).max(f64::MIN_POSITIVE);
     let unshot_fraction =
-        |r: &Replica| r.unshot.iter().zip(&area).map(|(u, a)| a * luminance(*u)).sum::<f64>() / emitted;
+        |r: &Replica| r.unshot.iter().zip(area).map(|(u, a)| a * luminance(*u)).sum::<f64>() / emitted;
     let mean_unshot = |reps: &[Replica]| reps.iter().map(unshot_fraction).sum::<f64>() / reps.len() as f64;
     let mut reps = vec![Replica::new(sys.emission); REPLICAS];
     let mut residual = mean_unshot(&reps);
@@ -43,7 +43,7 @@ pub(super) fn solve(sys: &RaySystem, mon: &mut Monitor) -> Result<Solution> {
         // All replicas advance, or none (an interrupt keeps the previous iterate).
         let mut deposits = Vec::with_capacity(REPLICAS);
         for (r, rep) in reps.iter().enumerate() {
-            let power: Vec<Rgb> = rep.unshot.iter().zip(&area).map(|(u, a)| *u * *a).collect();
+            let power: Vec<Rgb> = rep.unshot.iter().zip(area).map(|(u, a)| *u * *a).collect();
             let count = ((per_replica as f64 * unshot_fraction(rep)).ceil() as u64).max(1);
             let stopper = || mon.interrupted().is_some();
             match shooter.distribute(&power, count, stream(it, r), &stopper) {
@@ -55,10 +55,9 @@ pub(super) fn solve(sys: &RaySystem, mon: &mut Monitor) -> Result<Solution> {
             mon.rays += d.rays;
             rep.escaped += d.escaped;
             for i in 0..n {
-                let arrived = d.received[i];
-                let rho = sys.reflectance[i];
-                rep.absorbed += (Rgb::ONE - rho) * arrived;
-                rep.unshot[i] = rho * arrived / area[i];
+                let (reflected, absorbed) = sys.receive(i, d.received[i]);
+                rep.absorbed += absorbed;
+                rep.unshot[i] = reflected;
                 rep.b[i] += rep.unshot[i];
             }
         }

@@ -379,7 +379,9 @@ fn time_budget_stops_every_solver() {
 
 fn ray_solve(f: &Fixture, solver: Solver, rays: u64, seed: u64, tolerance: f64) -> Solution {
     let scene_rays = SceneRays::new(&f.scene.polygons);
-    let sys = RaySystem { mesh: &f.mesh, rays: &scene_rays, reflectance: &f.rho, emission: &f.emission };
+    let area: Vec<f64> = f.mesh.elements.iter().map(|e| e.area).collect();
+    let receivers = crate::mesh::Receivers::all_open(&f.mesh);
+    let sys = RaySystem { mesh: &f.mesh, rays: &scene_rays, reflectance: &f.rho, emission: &f.emission, receivers: &receivers, area: &area };
     let opts = Options { tolerance, seed, rays: Some(rays), max_iterations: 200, ..Default::default() };
     stochastic::solve(solver, &sys, &opts, &NoProgress, None).unwrap()
 }
@@ -466,7 +468,7 @@ fn stochastic_results_do_not_depend_on_the_thread_count() {
 #[test]
 fn locator_finds_the_element_of_points_on_every_patch() {
     for f in [cornell(), open_box()] {
-        let loc = stochastic::Locator::new(&f.mesh);
+        let loc = crate::mesh::Locator::new(&f.mesh);
         for (k, e) in f.mesh.elements.iter().enumerate() {
             for (u, v) in [(0.5, 0.5), (0.01, 0.02), (0.97, 0.9), (0.3, 0.99)] {
                 let p = e.point(&f.mesh.positions, u, v);
