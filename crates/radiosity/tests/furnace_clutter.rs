@@ -77,12 +77,12 @@ pub fn cases() -> Vec<(&'static str, Scene)> {
 #[test]
 #[ignore]
 fn survey() {
-    let methods = [Method::PointSampled, Method::MonteCarlo, Method::Hemicube, Method::Adaptive];
+    let methods = if std::env::var("ONLY_ADAPTIVE").is_ok() { vec![Method::Adaptive] } else { vec![Method::PointSampled, Method::MonteCarlo, Method::Hemicube, Method::Adaptive] };
     for (name, scene) in cases() {
-        for m in methods {
+        for &m in &methods {
             let mut s = Settings::default();
             s.form_factors.method = m;
-            s.mesh_size = Some(0.1);
+            s.mesh_size = Some(std::env::var("MESH").ok().and_then(|x| x.parse().ok()).unwrap_or(0.1));
             s.solve.tolerance = 1e-9;
             s.solver = Solver::Jacobi;
             let solved = match solve_scene(scene.clone(), &s, &NoProgress) {
@@ -94,6 +94,21 @@ fn survey() {
             };
             let g = &solved.ff_stats.as_ref().unwrap().guard;
             println!("{name:18} {:14} guard: corrected {} dropped {} raw max {:.4} at {:?}", m.name(), g.rows_corrected, g.entries_dropped, g.max_row_sum, g.worst_row);
+            if let Some(w) = g.worst_row {
+                let w = w as usize;
+                let e = &solved.mesh.elements[w];
+                let p = &solved.scene.polygons[e.patch as usize];
+                println!("   worst el {w} patch {} obj {} back {} c {:?} n {:?} open {:.3} cells {:016x}", e.patch, p.object, p.back_side, e.centroid, e.normal, solved.receivers.open_fraction[w], solved.receivers.open_cells[w]);
+                let f = solved.transport.as_ref().unwrap();
+                let (cols, vals) = f.row(w); let mut row: Vec<(u32, f64)> = cols.iter().copied().zip(vals.iter().map(|x| *x as f64)).collect();
+                row.sort_by(|a, b| b.1.total_cmp(&a.1));
+                for (j, x) in row.iter().take(6) {
+                    let ej = &solved.mesh.elements[*j as usize];
+                    let pj = &solved.scene.polygons[ej.patch as usize];
+                    println!("     -> {j} f {x:.4} patch {} obj {} back {} c {:?} n {:?} open {:.3}", ej.patch, pj.object, pj.back_side, ej.centroid, ej.normal, solved.receivers.open_fraction[*j as usize]);
+                }
+            }
+            if std::env::var("ONLY_GUARD").is_ok() { continue; }
             let f = solved.transport.as_ref().unwrap();
             let n = solved.mesh.len();
             let mut worst = (0.0, 0);

@@ -44,11 +44,16 @@ pub const DEFAULT_MAX_EVALUATIONS: usize = 200_000;
 pub(crate) struct Rows<'a> {
     ctx: &'a Context<'a>,
     tree: PolyTree,
+    /// Per polygon, the lower-numbered coincident same-facing polygons that overlap it:
+    /// they own the overlap ([`super::geom::coincident_twins`]), so another row sees the
+    /// overlap once (a two-sided box's bottom on the floor).
+    twins: Vec<Vec<u32>>,
 }
 
 impl<'a> Rows<'a> {
     pub fn new(ctx: &'a Context<'a>) -> Self {
-        Rows { ctx, tree: PolyTree::new(&ctx.scene.polygons) }
+        let eps = 1e-7 * ctx.scene.diagonal();
+        Rows { ctx, tree: PolyTree::new(&ctx.scene.polygons), twins: super::geom::coincident_twins(&ctx.scene.polygons, eps) }
     }
 }
 
@@ -63,10 +68,13 @@ pub(crate) struct Scratch {
     heap: BinaryHeap<Region>,
     shaft: Vec<(DVec3, f64)>,
     rshaft: Vec<(DVec3, f64)>,
-    /// Whether the pair's first / second element is partly covered (see [`Rows::row`]).
-    cover: (bool, bool),
-    /// Whether the polygon being integrated over is partly covered.
-    cover_sender: bool,
+    /// The pair's first / second element where it is partly covered (see [`Rows::row`]).
+    cover: (Option<u32>, Option<u32>),
+    /// The element being integrated over, where it is partly covered.
+    cover_sender: Option<u32>,
+    /// The polygon integrated over when it is not the row's own (then its overlaps with
+    /// lower-numbered twins do not send).
+    twin_sender: Option<u32>,
 }
 
 #[derive(Default)]
@@ -82,19 +90,21 @@ struct EvalScratch {
     sides: Vec<DVec3>,
 }
 
-/// The receiver of a pair: its polygon, plane frame and 2-D outline (counter-clockwise).
+/// The receiver of a pair: its polygon, plane frame, and the convex pieces that receive
+/// (the polygon less what coincident twins own), in 2-D (counter-clockwise) and in 3-D.
 struct Receiver<'p> {
     verts: &'p [DVec3],
     normal: DVec3,
     frame: PlaneFrame,
-    outline: Vec<DVec2>,
+    start: PieceSet,
+    pieces: Vec<Vec<DVec3>>,
     centroid: DVec3,
     eps2: f64,
     min_area: f64,
 }
 
 impl<'p> Receiver<'p> {
-    fn new(verts: &'p [DVec3], normal: DVec3) -> Self {
+    fn new(verts: &'p [DVec3], normal: DVec3, cuts: &[&[DVec3]], s: &mut EvalScratch) -> Self {
         let frame = PlaneFrame::new(verts[0], normal);
         let mut outline: Vec<DVec2> = verts.iter().map(|v| frame.to_2d(*v)).collect();
         if area2_2d(&outline) < 0.0 {
@@ -102,8 +112,25 @@ impl<'p> Receiver<'p> {
         }
         let area = 0.5 * area2_2d(&outline).abs();
         let size = area.sqrt();
+        let (eps2, min_area) = (1e-12 * size, 1e-14 * area);
         let centroid = verts.iter().copied().sum::<DVec3>() / verts.len() as f64;
-        Receiver { verts, normal, frame, outline, centroid, eps2: 1e-12 * size, min_area: 1e-14 * area }
+        let mut start = PieceSet::default();
+        start.push(&outline);
+        for c in cuts {
+            // A twin lies in the receiver's plane: its outline there is exact.
+            let mut cut: Vec<DVec2> = c.iter().map(|v| frame.to_2d(*v)).collect();
+            if area2_2d(&cut) < 0.0 {
+                cut.reverse();
+            }
+            start.subtract(&cut, eps2, min_area, &mut s.next, &mut s.tmp2);
+            std::mem::swap(&mut start, &mut s.next);
+        }
+        let pieces = if cuts.is_empty() {
+            vec![verts.to_vec()]
+        } else {
+            (0..start.len()).map(|k| start.piece(k).iter().map(|q| frame.to_3d(*q)).collect()).collect()
+        };
+        Receiver { verts, normal, frame, start, pieces, centroid, eps2, min_area }
     }
 }
 
@@ -137,7 +164,7 @@ impl RowSource for Rows<'_> {
             for j in pe.first..pe.first + pe.count {
                 let ej = &mesh.elements[j as usize];
                 let (cj, nj) = ctx.corners(j as usize);
-                s.cover = (partly(oi), partly(open(j as usize)));
+                s.cover = (partly(oi).then_some(i as u32), partly(open(j as usize)).then_some(j));
                 let af = self.pair(ci, ei.normal, ei.patch, &cj[..nj], ej.normal, q, s);
                 if af != 0.0 {
                     out.push((j, af / area_i));
@@ -194,13 +221,20 @@ impl Rows<'_> {
     #[allow(clippy::too_many_arguments)]
     fn pair(&self, pi: &[DVec3], ni: DVec3, patch_i: u32, pj: &[DVec3], nj: DVec3, patch_j: u32, s: &mut Scratch) -> f64 {
         let (ai, aj) = (super::geom::area_3d(pi), super::geom::area_3d(pj));
-        let swap = match aj.total_cmp(&ai) {
-            CmpOrdering::Less => true,
-            CmpOrdering::Greater => false,
-            CmpOrdering::Equal if patch_i != patch_j => patch_j < patch_i,
-            CmpOrdering::Equal => (pj[0].x, pj[0].y, pj[0].z) < (pi[0].x, pi[0].y, pi[0].z),
-        };
+        // A partly covered row element is always the one integrated over: its covered
+        // pieces are left out, and the row is divided by its open area. Integrated over
+        // the other element, the row also held the light that reaches its covered part,
+        // and divided by the open area that came to 1/open times too much (raw row sums
+        // up to 13 beside contacts, issue 9).
+        let swap = s.cover.0.is_none()
+            && match aj.total_cmp(&ai) {
+                CmpOrdering::Less => true,
+                CmpOrdering::Greater => false,
+                CmpOrdering::Equal if patch_i != patch_j => patch_j < patch_i,
+                CmpOrdering::Equal => (pj[0].x, pj[0].y, pj[0].z) < (pi[0].x, pi[0].y, pi[0].z),
+            };
         s.cover_sender = if swap { s.cover.1 } else { s.cover.0 };
+        s.twin_sender = (swap && !self.twins[patch_j as usize].is_empty()).then_some(patch_j);
         if swap {
             self.pair_directed(pj, nj, patch_j, pi, ni, patch_i, s)
         } else {
@@ -245,7 +279,10 @@ impl Rows<'_> {
             }
             occ.push(k);
         });
-        if s.occ.is_empty() && !ctx.opts.adaptive_always_integrate && !s.cover_sender {
+        // The receiver's overlaps with lower-numbered twins belong to them and are cut out
+        // of it, except for the row's own element, which gathers over all of its area.
+        let cuts: &[u32] = if s.twin_sender.is_none() { &self.twins[patch_j as usize] } else { &[] };
+        if s.occ.is_empty() && !ctx.opts.adaptive_always_integrate && s.cover_sender.is_none() && s.twin_sender.is_none() && cuts.is_empty() {
             return analytic::area_factor_with(&mut s.an, pi, ni, pj, nj);
         }
         // Only the part of each polygon in front of the other can exchange energy; cutting
@@ -257,7 +294,11 @@ impl Rows<'_> {
         if si.is_empty() || sj.is_empty() {
             return 0.0;
         }
-        let recv = Receiver::new(&sj, nj);
+        let cut_polys: Vec<&[DVec3]> = cuts.iter().filter(|&&t| t != patch_i).map(|&t| polys[t as usize].vertices.as_slice()).collect();
+        let recv = Receiver::new(&sj, nj, &cut_polys, &mut s.eval);
+        if recv.pieces.is_empty() {
+            return 0.0;
+        }
         // Start from regions no larger than about half the distance between the two
         // polygons, so that no shadow feature is narrower than the first samples' spacing.
         let min_level = if s.occ.is_empty() {
@@ -269,16 +310,35 @@ impl Rows<'_> {
             let dist = (recv.centroid - ci).length().max(1e-300);
             ((2.0 * diam / dist).log2().ceil() as i32).clamp(0, 4) as u32
         };
-        let pieces = self.sender_pieces(&si, ni, s);
+        // A partly covered sender is integrated over its open cells (merged into convex
+        // rectangles of its parameter domain), so that the integral and the open area it
+        // is divided by are one region.
+        let parts: Vec<Vec<DVec3>> = match s.cover_sender {
+            Some(e) => ctx
+                .receivers
+                .open_pieces(ctx.mesh, e as usize)
+                .into_iter()
+                .filter_map(|r| {
+                    let mut c = Vec::new();
+                    clip_halfspace(&r, |p| nj.dot(p - oj), eps, &mut c);
+                    (c.len() >= 3).then_some(c)
+                })
+                .collect(),
+            None => vec![si],
+        };
         let mut total = 0.0;
-        for piece in &pieces {
-            if s.cover_sender {
-                let c = piece.iter().copied().sum::<DVec3>() / piece.len() as f64;
-                if crate::mesh::coverage::covered(c, ni, patch_i, ctx.scene, ctx.rays, ctx.scene.diagonal()) {
-                    continue;
+        for part in &parts {
+            for piece in &self.sender_pieces(part, ni, s) {
+                if let Some(t) = s.twin_sender {
+                    // The overlap with a lower-numbered twin sends as that twin.
+                    let c = piece.iter().copied().sum::<DVec3>() / piece.len() as f64;
+                    let eps = 1e-7 * ctx.scene.diagonal();
+                    if self.twins[t as usize].iter().any(|&o| super::geom::inside_convex(c, &polys[o as usize].vertices, polys[o as usize].normal, eps)) {
+                        continue;
+                    }
                 }
+                total += self.integrate(piece, ni, &recv, min_level, s);
             }
-            total += self.integrate(piece, ni, &recv, min_level, s);
         }
         total
     }
@@ -401,7 +461,7 @@ impl Rows<'_> {
             return 0.0;
         }
         if occ.is_empty() {
-            return point_to_polygon_unsided(x, nx, recv.verts);
+            return recv.pieces.iter().map(|p| point_to_polygon_unsided(x, nx, p)).sum();
         }
         // Pyramid side planes through x and each receiver edge, oriented inwards.
         s.sides.clear();
@@ -415,7 +475,9 @@ impl Rows<'_> {
             s.sides.push(pn);
         }
         s.pieces.clear();
-        s.pieces.push(&recv.outline);
+        for k in 0..recv.start.len() {
+            s.pieces.push(recv.start.piece(k));
+        }
         let polys = &self.ctx.scene.polygons;
         for &o in occ {
             // Clip the occluder to the receiver's front half-space and the pyramid.
@@ -537,7 +599,7 @@ impl RegionCtx<'_, '_> {
             })
             .collect();
         if occ.is_empty() {
-            let est = analytic::area_factor_with(self.an, &tri, self.ni, self.recv.verts, self.recv.normal);
+            let est = self.recv.pieces.iter().map(|p| analytic::area_factor_with(self.an, &tri, self.ni, p, self.recv.normal)).sum();
             return Region { tri, est, err: 0.0, occ };
         }
         *evals += EVALS_PER_REGION;
@@ -695,7 +757,7 @@ mod tests {
         let mut s = rows.scratch();
         let _ = rows.pair_directed(&sa.vertices, sa.normal, pa, &sb.vertices, sb.normal, pb, &mut s);
         assert!(!s.occ.is_empty());
-        let recv = Receiver::new(&sb.vertices, sb.normal);
+        let recv = Receiver::new(&sb.vertices, sb.normal, &[], &mut s.eval);
         let x = DVec3::new(353.3, 98.0, 559.2);
         let occ = s.occ.clone();
         let exact = rows.visible_factor(x, sa.normal, &recv, &occ, &mut s.eval);

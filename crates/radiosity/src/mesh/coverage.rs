@@ -89,6 +89,15 @@ impl Receivers {
         m == u64::MAX || m & (1u64 << cell(u, v)) != 0
     }
 
+    /// The open part of element `e` as convex polygons (counter-clockwise about its
+    /// normal): runs of open cells along u, merged over rows with the same run into
+    /// rectangles of the parameter domain. Lines of constant u or v are straight on both
+    /// element shapes (bilinear quads; triangles, where v runs along rays from the first
+    /// corner), so the polygons are exact and their areas sum to the open area.
+    pub fn open_pieces(&self, mesh: &Mesh, e: usize) -> Vec<Vec<DVec3>> {
+        open_polygons(&mesh.elements[e], &mesh.positions, self.open_cells[e])
+    }
+
     /// The open cell of element `e` numbered `k` among its open cells (0 ≤ k < the number
     /// of open cells) as the (u, v) of its lower corner; None if no cell is open.
     pub fn open_cell(&self, e: usize, k: u32) -> Option<(f64, f64)> {
@@ -154,6 +163,19 @@ impl Receivers {
                         frac = open.len() as f64 / fine.len() as f64;
                         lv[MAX_K - 1] = open;
                         cells = mask;
+                    } else {
+                        // The fine grid found nothing open (a sliver around a 3 × 3
+                        // point): the fine cells whose centres lie in an open 3 × 3 cell.
+                        cells = 0;
+                        let coarse = grid(e, &mesh.positions, MAX_K);
+                        for b in 0..FINE_K * FINE_K {
+                            let (u, v) = (((b % FINE_K) as f64 + 0.5) / FINE_K as f64, ((b / FINE_K) as f64 + 0.5) / FINE_K as f64);
+                            let k = ((v * MAX_K as f64) as usize).min(MAX_K - 1) * MAX_K + ((u * MAX_K as f64) as usize).min(MAX_K - 1);
+                            if open3_pts.iter().any(|p| (*p - coarse[k]).length_squared() == 0.0) {
+                                cells |= 1 << b;
+                            }
+                        }
+                        frac = cells.count_ones() as f64 / (FINE_K * FINE_K) as f64;
                     }
                 }
                 // k = 1: the centroid when the whole element is open, else the open point
@@ -189,6 +211,20 @@ impl Receivers {
                 (lv, frac, cells)
             })
             .collect();
+        // Cells of a quad that is not a parallelogram differ in area: the open fraction
+        // of a partly covered element is the area of its open polygons, so that every
+        // method divides by the area it integrates over.
+        let res: Vec<_> = res
+            .into_iter()
+            .zip(&mesh.elements)
+            .map(|((p, f, c), e)| {
+                if c == 0 || c == u64::MAX || !(e.area > 0.0) {
+                    return (p, f, c);
+                }
+                let a: f64 = open_polygons(e, &mesh.positions, c).iter().map(|q| (1..q.len() - 1).map(|k| (q[k] - q[0]).cross(q[k + 1] - q[0]).dot(e.normal)).sum::<f64>() / 2.0).sum();
+                (p, (a / e.area).clamp(0.0, 1.0), c)
+            })
+            .collect();
         let mut points = Vec::with_capacity(res.len());
         let mut open_fraction = Vec::with_capacity(res.len());
         let mut open_cells = Vec::with_capacity(res.len());
@@ -201,6 +237,60 @@ impl Receivers {
         let rays = PROBES as u64 * ((1 + 4 + 9 + 4) * mesh.len() as u64 + (FINE_K * FINE_K) as u64 * mixed);
         Receivers { points, open_fraction, open_cells, rays }
     }
+}
+
+/// The polygons of [`Receivers::open_pieces`] for the open-cell `mask` of element `el`.
+pub fn open_polygons(el: &super::Element, positions: &[DVec3], m: u64) -> Vec<Vec<DVec3>> {
+    let k = FINE_K as f64;
+    let runs = |j: usize| {
+        let mut out = Vec::new();
+        let mut i = 0;
+        while i < FINE_K {
+            if m & (1 << (j * FINE_K + i)) != 0 {
+                let i0 = i;
+                while i < FINE_K && m & (1 << (j * FINE_K + i)) != 0 {
+                    i += 1;
+                }
+                out.push((i0, i));
+            } else {
+                i += 1;
+            }
+        }
+        out
+    };
+    let mut rects = Vec::new();
+    // (i0, i1, first row) of the rectangles still growing.
+    let mut open: Vec<(usize, usize, usize)> = Vec::new();
+    for j in 0..=FINE_K {
+        let row = if j < FINE_K { runs(j) } else { Vec::new() };
+        open.retain(|&(i0, i1, j0)| {
+            let go_on = row.contains(&(i0, i1));
+            if !go_on {
+                rects.push((i0, i1, j0, j));
+            }
+            go_on
+        });
+        for r in row {
+            if !open.iter().any(|&(i0, i1, _)| (i0, i1) == r) {
+                open.push((r.0, r.1, j));
+            }
+        }
+    }
+    rects
+        .into_iter()
+        .map(|(i0, i1, j0, j1)| {
+            let (u0, u1, v0, v1) = (i0 as f64 / k, i1 as f64 / k, j0 as f64 / k, j1 as f64 / k);
+            let mut p: Vec<DVec3> = Vec::with_capacity(4);
+            for (u, v) in [(u0, v0), (u1, v0), (u1, v1), (u0, v1)] {
+                let x = el.point(positions, u, v);
+                if p.last().is_none_or(|q| *q != x) && p.first().is_none_or(|q| *q != x || p.len() < 2) {
+                    p.push(x);
+                }
+            }
+            p
+        })
+        .filter(|p| p.len() >= 3)
+        .collect()
 }
 
 /// The [`FINE_K`] × [`FINE_K`] cell of (u, v).
@@ -224,7 +314,7 @@ fn grid(e: &super::Element, positions: &[DVec3], k: usize) -> Vec<DVec3> {
 }
 
 /// True when every probe ray from `p` hits a back face first.
-pub(crate) fn covered(p: DVec3, n: DVec3, patch: u32, scene: &Scene, rays: &SceneRays, diag: f64) -> bool {
+fn covered(p: DVec3, n: DVec3, patch: u32, scene: &Scene, rays: &SceneRays, diag: f64) -> bool {
     let (t, b) = basis(n);
     let origin = (p + n * (1e-7 * diag)).as_vec3();
     for s in 0..PROBES {

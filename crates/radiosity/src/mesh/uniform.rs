@@ -308,6 +308,44 @@ mod tests {
         assert_eq!(r.open_cell(0, 0), None);
     }
 
+    #[test]
+    fn open_pieces_cover_exactly_the_open_cells_of_quads_and_triangles() {
+        let positions = vec![
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(1.5, 1.2, 0.0),
+            DVec3::new(-0.3, 0.9, 0.0),
+        ];
+        let quad = Element { vertices: [0, 1, 2, 3], patch: 0, area: 0.0, centroid: DVec3::ZERO, normal: DVec3::Z };
+        let tri = Element { vertices: [0, 1, 2, NO_VERTEX], ..quad };
+        let area = |p: &[DVec3]| (1..p.len() - 1).map(|k| (p[k] - p[0]).cross(p[k + 1] - p[0]).z).sum::<f64>() / 2.0;
+        for mut e in [quad, tri] {
+            let (c, n) = e.corners(&positions);
+            e.area = area(&c[..n]);
+            let mesh = Mesh { positions: positions.clone(), elements: vec![e], patches: vec![PatchElements { first: 0, count: 1 }], ..Default::default() };
+            let mut r = crate::mesh::Receivers::all_open(&mesh);
+            for mask in [0x00fe_0000_00e0_e0c0u64, 0xd1d1_d1d1_d1d1_d151, 0x3f3f_ffff_ffff_ffff, 1, u64::MAX] {
+                r.open_cells[0] = mask;
+                let pieces = r.open_pieces(&mesh, 0);
+                let sum: f64 = pieces.iter().map(|p| area(p)).sum();
+                let cell = |b: u32| {
+                    let (u, v) = ((b % 8) as f64 / 8.0, (b / 8) as f64 / 8.0);
+                    let c: Vec<DVec3> = [(u, v), (u + 0.125, v), (u + 0.125, v + 0.125), (u, v + 0.125)].iter().map(|&(a, b)| e.point(&positions, a, b)).collect();
+                    area(&c)
+                };
+                let want: f64 = (0..64).filter(|b| mask >> b & 1 == 1).map(cell).sum();
+                assert!((sum - want).abs() < 1e-12, "{:?} mask {mask:016x}: pieces {sum}, open area {want}", e.vertices);
+                assert!(pieces.iter().all(|p| area(p) > 0.0), "a piece is wound clockwise");
+                // Every open cell's centre lies in one piece, every covered one in none.
+                for b in 0..64 {
+                    let x = e.point(&positions, ((b % 8) as f64 + 0.5) / 8.0, ((b / 8) as f64 + 0.5) / 8.0);
+                    let inside = pieces.iter().filter(|p| crate::form_factor::geom::inside_convex(x, p, DVec3::Z, 0.0)).count();
+                    assert_eq!(inside, (mask >> b & 1) as usize, "cell {b} of mask {mask:016x}");
+                }
+            }
+        }
+    }
+
     /// Stops once `after` units of progress were reported; counts them.
     struct StopAfter {
         after: u64,
