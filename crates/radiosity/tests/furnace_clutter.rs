@@ -74,6 +74,9 @@ pub fn cases() -> Vec<(&'static str, Scene)> {
     ]
 }
 
+/// Diagnostic, run by hand: per case and method, the guard's counts and the worst row with
+/// its largest entries. `MESH=0.25` sets the mesh size (default 0.1), `ONLY_ADAPTIVE=1`
+/// runs adaptive alone, `ONLY_GUARD=1` skips the solve.
 #[test]
 #[ignore]
 fn survey() {

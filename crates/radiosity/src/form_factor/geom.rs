@@ -374,33 +374,58 @@ mod tests {
 /// back copy of a two-sided box's bottom on the floor it stands on). From any point, both
 /// members of such a pair are visible where they overlap, so methods that test
 /// visibility per polygon would count the overlap twice; the lower number owns it.
-/// Candidates are grouped by plane (normal and offset quantised to `eps`), then tested by
-/// separating axes in the plane.
+/// Candidates are grouped by normal (quantised to 1e-3, looking in the neighbouring
+/// cells too, so that no pair is lost at a cell boundary), matched by normal (to 1e-9) and
+/// plane offset (to 10·`eps`) within those groups (sorted by offset), then tested by
+/// separating axes in the plane. (A hash on the quantised offset lost pairs whose offsets
+/// fell on either side of a bin edge: a desk top's underside and the top of a slab under
+/// it in office2, issue 9.)
 pub fn coincident_twins(polys: &[crate::scene::Polygon], eps: f64) -> Vec<Vec<u32>> {
     use std::collections::HashMap;
     let mut out = vec![Vec::new(); polys.len()];
-    let q = |x: f64, s: f64| (x / s).round() as i64;
-    let mut groups: HashMap<[i64; 4], Vec<u32>> = HashMap::new();
+    let key = |n: DVec3| [(n.x * 1e3).round() as i64, (n.y * 1e3).round() as i64, (n.z * 1e3).round() as i64];
+    let offset = |p: &crate::scene::Polygon| p.normal.dot(p.vertices[0]);
+    let mut groups: HashMap<[i64; 3], Vec<(f64, u32)>> = HashMap::new();
     for (k, p) in polys.iter().enumerate() {
-        let n = p.normal;
-        let d = n.dot(p.vertices[0]);
-        groups.entry([q(n.x, 1e-6), q(n.y, 1e-6), q(n.z, 1e-6), q(d, eps.max(f64::MIN_POSITIVE) * 10.0)]).or_default().push(k as u32);
+        groups.entry(key(p.normal)).or_default().push((offset(p), k as u32));
     }
-    for members in groups.values().filter(|m| m.len() > 1) {
-        let n = polys[members[0] as usize].normal;
-        let frame = PlaneFrame::new(polys[members[0] as usize].vertices[0], n);
-        let flat: Vec<Vec<DVec2>> = members.iter().map(|&k| polys[k as usize].vertices.iter().map(|v| frame.to_2d(*v)).collect()).collect();
-        let boxes: Vec<(DVec2, DVec2)> = flat.iter().map(|p| bounds_2d(p)).collect();
-        for a in 0..members.len() {
-            for b in 0..a {
-                let (la, ha) = boxes[a];
-                let (lb, hb) = boxes[b];
-                if la.x >= hb.x - eps || lb.x >= ha.x - eps || la.y >= hb.y - eps || lb.y >= ha.y - eps {
-                    continue;
-                }
-                if convex_overlap_2d(&flat[a], &flat[b], eps) {
-                    let (hi, lo) = if members[a] > members[b] { (members[a], members[b]) } else { (members[b], members[a]) };
-                    out[hi as usize].push(lo);
+    for g in groups.values_mut() {
+        g.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    let tol = 10.0 * eps.max(f64::MIN_POSITIVE);
+    let flat = |p: &crate::scene::Polygon, frame: &PlaneFrame| -> Vec<DVec2> { p.vertices.iter().map(|v| frame.to_2d(*v)).collect() };
+    for (a, pa) in polys.iter().enumerate() {
+        let (n, d) = (pa.normal, offset(pa));
+        let k = key(n);
+        let mut frame_a: Option<(PlaneFrame, Vec<DVec2>, (DVec2, DVec2))> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let Some(g) = groups.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) else { continue };
+                    let start = g.partition_point(|x| x.0 < d - tol);
+                    for &(db, b) in &g[start..] {
+                        if db > d + tol {
+                            break;
+                        }
+                        let pb = &polys[b as usize];
+                        if b as usize >= a || pb.normal.dot(n) < 1.0 - 1e-9 {
+                            continue;
+                        }
+                        let (frame, fa, (la, ha)) = frame_a.get_or_insert_with(|| {
+                            let frame = PlaneFrame::new(pa.vertices[0], n);
+                            let fa = flat(pa, &frame);
+                            let bx = bounds_2d(&fa);
+                            (frame, fa, bx)
+                        });
+                        let fb = flat(pb, frame);
+                        let (lb, hb) = bounds_2d(&fb);
+                        if la.x >= hb.x - eps || lb.x >= ha.x - eps || la.y >= hb.y - eps || lb.y >= ha.y - eps {
+                            continue;
+                        }
+                        if convex_overlap_2d(fa, &fb, eps) {
+                            out[a].push(b);
+                        }
+                    }
                 }
             }
         }

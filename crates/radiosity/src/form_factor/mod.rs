@@ -415,6 +415,9 @@ pub(crate) struct Context<'a> {
     pub opts: &'a Options,
     /// Per patch: (a point of its plane, unit normal).
     pub planes: Vec<(DVec3, DVec3)>,
+    /// Per patch: how far its vertices may lie from its plane (the planarity tolerance
+    /// that input polygons are accepted with, on its size, plus `eps`).
+    pub flatness: Vec<f64>,
     /// Distance below which a point counts as on a plane.
     pub eps: f64,
 }
@@ -422,7 +425,16 @@ pub(crate) struct Context<'a> {
 impl<'a> Context<'a> {
     fn new(scene: &'a Scene, mesh: &'a Mesh, rays: &'a SceneRays, receivers: &'a Receivers, opts: &'a Options) -> Self {
         let planes = scene.polygons.iter().map(|p| (p.vertices[0], p.normal)).collect();
-        Context { scene, mesh, rays, receivers, opts, planes, eps: 1e-9 * scene.diagonal() }
+        let eps = 1e-9 * scene.diagonal();
+        let flatness = scene
+            .polygons
+            .iter()
+            .map(|p| {
+                let (lo, hi) = p.vertices.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+                2.0 * crate::scene::PLANARITY_TOL * (hi - lo).length() + eps
+            })
+            .collect();
+        Context { scene, mesh, rays, receivers, opts, planes, flatness, eps }
     }
 
     /// Patches that can exchange light with patch `pi` at all: some vertex in front of
@@ -436,6 +448,15 @@ impl<'a> Context<'a> {
                 continue;
             }
             let (cq, nq) = self.planes[q];
+            // Back to back in one plane (the two sides of a two-sided polygon, or a wall's
+            // two faces): no exchange. Checked with the planarity tolerance, since the
+            // copies of a slightly warped quad lie up to that far in front of each other,
+            // which made each see the other as a whole hemisphere (office2's chair legs:
+            // raw row sums of 2, issue 9).
+            let tol = self.flatness[pi as usize].max(self.flatness[q]);
+            if nq.dot(ni) < -1.0 + 1e-9 && poly.vertices.iter().all(|v| ni.dot(*v - ci).abs() <= tol) {
+                continue;
+            }
             let q_in_front = poly.vertices.iter().any(|v| ni.dot(*v - ci) > self.eps);
             if q_in_front && poly_i.vertices.iter().any(|v| nq.dot(*v - cq) > self.eps) {
                 out.push(q as u32);

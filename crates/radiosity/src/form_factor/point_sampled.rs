@@ -74,32 +74,78 @@ impl RowSource for Rows<'_> {
         };
         let kv = opts.visibility_samples.max(1);
         // Visible fraction of element j seen from x (kv² stratified rays).
+        let ei_normal = ei.normal;
         let mut visibility = |x: DVec3, j: u32, q: u32, rng: &mut Rng, nrays: &mut u64| {
             let ej = &mesh.elements[j as usize];
+            let owned_by_twin = |y: DVec3| {
+                self.twins[q as usize].iter().any(|&t| {
+                    let p = &scene.polygons[t as usize];
+                    super::geom::inside_convex(y, &p.vertices, p.normal, eps)
+                })
+            };
             stratified(kv, rng, vis_pts);
-            let mut seen = 0u32;
-            let mut tried = 0u32;
+            // Each sample is weighted by the point-to-point kernel cos θx cos θy / r²
+            // (the sampling density is uniform): at close range the factor comes from the
+            // part of j right in front of x, and a plain count of visible samples made a
+            // sliver seen past a coincident twin count like the whole element (the inside
+            // of office2's and the classroom's thin slabs: raw row sums of 1.7, issue 9).
+            let weight = |y: DVec3| {
+                let d = y - x;
+                let r2 = d.length_squared().max(f64::MIN_POSITIVE);
+                (ei_normal.dot(d).max(0.0) * (-ej.normal.dot(d)).max(0.0) / (r2 * r2)).min(f64::MAX / 1e6)
+            };
+            let mut seen = 0.0f64;
+            let mut tried = 0.0f64;
+            let mut count = 0u32;
             for &(a, b) in vis_pts.iter() {
                 let y = ej.point(&mesh.positions, a, b);
                 if ei.normal.dot(y - x) <= 0.0 {
                     continue;
                 }
-                tried += 1;
-                let owned_by_twin = || {
-                    self.twins[q as usize].iter().any(|&t| {
-                        let p = &scene.polygons[t as usize];
-                        super::geom::inside_convex(y, &p.vertices, p.normal, eps)
-                    })
-                };
-                if rays.visible(x, pi, y, q) && !owned_by_twin() {
-                    seen += 1;
+                // The overlap with a twin is not part of this element's factor (its kernel
+                // leaves it out exactly, see `kernel` below): its samples do not count.
+                if owned_by_twin(y) {
+                    continue;
+                }
+                count += 1;
+                let w = weight(y);
+                tried += w;
+                if rays.visible(x, pi, y, q) {
+                    seen += w;
                 }
             }
-            *nrays += tried as u64;
-            if tried == 0 {
-                1.0
+            if count == 0 {
+                // No sample fell on the part of j in front of x (a large element that x
+                // sees only a sliver of): test that part itself, its centroid and the
+                // midpoints towards its corners. Counting it as wholly visible let the
+                // inside of a thin slab see a desk through the slab's top (office2: raw row
+                // sums of 1.3, issue 9).
+                let (cj, nv) = ej.corners(&mesh.positions);
+                let mut front = Vec::new();
+                super::geom::clip_halfspace(&cj[..nv], |p| ei_normal.dot(p - x), eps, &mut front);
+                if front.len() >= 3 {
+                    let c = front.iter().copied().sum::<DVec3>() / front.len() as f64;
+                    for y in std::iter::once(c).chain(front.iter().map(|v| c.lerp(*v, 0.5))) {
+                        if ei_normal.dot(y - x) <= 0.0 {
+                            continue;
+                        }
+                        if owned_by_twin(y) {
+                            continue;
+                        }
+                        count += 1;
+                        let w = weight(y);
+                        tried += w;
+                        if rays.visible(x, pi, y, q) {
+                            seen += w;
+                        }
+                    }
+                }
+            }
+            *nrays += count as u64;
+            if count == 0 || !(tried > 0.0) {
+                0.0
             } else {
-                seen as f64 / tried as f64
+                (seen / tried).clamp(0.0, 1.0)
             }
         };
         // Near pairs get k×k receiver points; far pairs the single point c1. The
@@ -116,7 +162,15 @@ impl RowSource for Rows<'_> {
             // factor to the whole patch (contour integral) — cheap and still exact in
             // total, which keeps closed rooms closed.
             let big = pe.count >= BIG_PATCH;
-            let exact_q = if big { point_to_polygon(c1, ei.normal, &poly_q.vertices, poly_q.normal) } else { 0.0 };
+            let twins_q = &self.twins[q as usize];
+            let exact_q = if big {
+                let cut = overlaps(&poly_q.vertices, twins_q, scene, eps);
+                (point_to_polygon(c1, ei.normal, &poly_q.vertices, poly_q.normal)
+                    - cut.iter().map(|o| point_to_polygon(c1, ei.normal, o, poly_q.normal)).sum::<f64>())
+                .max(0.0)
+            } else {
+                0.0
+            };
             let far_start = row.len();
             let mut approx_far_q = 0.0;
             let mut near_f1_q = 0.0;
@@ -128,6 +182,18 @@ impl RowSource for Rows<'_> {
                 if !cj.iter().any(|v| ei.normal.dot(*v - ei.centroid) > eps) {
                     continue;
                 }
+                // The parts of j that lower-numbered coincident twins own are left out of
+                // its kernel exactly (contour integrals of the convex overlaps).
+                let cut = if twins_q.is_empty() { Vec::new() } else { overlaps(cj, twins_q, scene, eps) };
+                let cut_fraction = (cut.iter().map(|o| super::geom::area_3d(o)).sum::<f64>() / ej.area).clamp(0.0, 1.0);
+                let kernel = |x: DVec3| {
+                    let f = point_to_polygon(x, ei.normal, cj, ej.normal);
+                    if cut.is_empty() {
+                        f
+                    } else {
+                        (f - cut.iter().map(|o| point_to_polygon(x, ei.normal, o, ej.normal)).sum::<f64>()).max(0.0)
+                    }
+                };
                 let d = (ej.centroid - ei.centroid).length();
                 let size_j = ej.area.sqrt();
                 let ratio = size_i.max(size_j) / d.max(1e-300);
@@ -148,9 +214,9 @@ impl RowSource for Rows<'_> {
                 let recv_pts = receivers.points(i, k);
                 if k == 1 || recv_pts.len() <= 1 {
                     let f1 = if big {
-                        point_to_point(c1, ei.normal, ej.centroid, ej.normal, ej.area)
+                        point_to_point(c1, ei.normal, ej.centroid, ej.normal, ej.area) * (1.0 - cut_fraction)
                     } else {
-                        point_to_polygon(c1, ei.normal, cj, ej.normal)
+                        kernel(c1)
                     };
                     if f1 > 0.0 {
                         approx_far_q += f1;
@@ -159,12 +225,12 @@ impl RowSource for Rows<'_> {
                     }
                     continue;
                 }
-                let f1 = point_to_polygon(c1, ei.normal, cj, ej.normal);
+                let f1 = kernel(c1);
                 near_f1_q += f1;
                 let mut sum = 0.0;
                 let mut unocc = 0.0;
                 for &x in recv_pts.iter() {
-                    let f = point_to_polygon(x, ei.normal, cj, ej.normal);
+                    let f = kernel(x);
                     if f <= 0.0 {
                         continue;
                     }
@@ -221,4 +287,30 @@ impl RowSource for Rows<'_> {
         }
         nrays
     }
+}
+
+/// The convex overlaps of polygon `v` with each of `twins` (coplanar, facing the same
+/// way): `v` clipped to the inside of every edge of the twin.
+fn overlaps(v: &[DVec3], twins: &[u32], scene: &crate::scene::Scene, eps: f64) -> Vec<Vec<DVec3>> {
+    let mut out = Vec::new();
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for &t in twins {
+        let tp = &scene.polygons[t as usize];
+        a.clear();
+        a.extend_from_slice(v);
+        let m = tp.vertices.len();
+        for k in 0..m {
+            let (p0, p1) = (tp.vertices[k], tp.vertices[(k + 1) % m]);
+            let inward = tp.normal.cross(p1 - p0);
+            super::geom::clip_halfspace(&a, |p| inward.dot(p - p0), 0.0, &mut b);
+            std::mem::swap(&mut a, &mut b);
+            if a.len() < 3 {
+                break;
+            }
+        }
+        if a.len() >= 3 && super::geom::area_3d(&a) > eps * eps {
+            out.push(a.clone());
+        }
+    }
+    out
 }

@@ -29,6 +29,7 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 
 pub use camera::Camera;
+pub use validate::PLANARITY_TOL;
 
 use crate::{Error, Location, Result, Rgb, Warning};
 

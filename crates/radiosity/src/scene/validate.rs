@@ -9,7 +9,7 @@ use crate::{Error, Location, Result, Warning};
 
 /// Relative out-of-plane distance (to the polygon's diameter) above which a polygon is
 /// treated as non-planar and split into triangles.
-const PLANARITY_TOL: f64 = 1e-6;
+pub const PLANARITY_TOL: f64 = 1e-6;
 
 pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     let SceneDesc {
