@@ -94,25 +94,23 @@ impl RowSource for Rows<'_> {
                 let r2 = d.length_squared().max(f64::MIN_POSITIVE);
                 (ei_normal.dot(d).max(0.0) * (-ej.normal.dot(d)).max(0.0) / (r2 * r2)).min(f64::MAX / 1e6)
             };
-            let mut seen = 0.0f64;
-            let mut tried = 0.0f64;
-            let mut count = 0u32;
-            for &(a, b) in vis_pts.iter() {
-                let y = ej.point(&mesh.positions, a, b);
-                if ei.normal.dot(y - x) <= 0.0 {
-                    continue;
+            let (mut seen, mut tried, mut count) = (0.0f64, 0.0f64, 0u32);
+            // One visibility sample y on j. The overlap with a twin is not part of this
+            // element's factor (its kernel leaves it out exactly, see `kernel` below): its
+            // samples do not count.
+            let test = |y: DVec3, seen: &mut f64, tried: &mut f64, count: &mut u32| {
+                if ei_normal.dot(y - x) <= 0.0 || owned_by_twin(y) {
+                    return;
                 }
-                // The overlap with a twin is not part of this element's factor (its kernel
-                // leaves it out exactly, see `kernel` below): its samples do not count.
-                if owned_by_twin(y) {
-                    continue;
-                }
-                count += 1;
+                *count += 1;
                 let w = weight(y);
-                tried += w;
+                *tried += w;
                 if rays.visible(x, pi, y, q) {
-                    seen += w;
+                    *seen += w;
                 }
+            };
+            for &(a, b) in vis_pts.iter() {
+                test(ej.point(&mesh.positions, a, b), &mut seen, &mut tried, &mut count);
             }
             if count == 0 {
                 // No sample fell on the part of j in front of x (a large element that x
@@ -126,18 +124,7 @@ impl RowSource for Rows<'_> {
                 if front.len() >= 3 {
                     let c = front.iter().copied().sum::<DVec3>() / front.len() as f64;
                     for y in std::iter::once(c).chain(front.iter().map(|v| c.lerp(*v, 0.5))) {
-                        if ei_normal.dot(y - x) <= 0.0 {
-                            continue;
-                        }
-                        if owned_by_twin(y) {
-                            continue;
-                        }
-                        count += 1;
-                        let w = weight(y);
-                        tried += w;
-                        if rays.visible(x, pi, y, q) {
-                            seen += w;
-                        }
+                        test(y, &mut seen, &mut tried, &mut count);
                     }
                 }
             }
