@@ -44,16 +44,14 @@ pub const DEFAULT_MAX_EVALUATIONS: usize = 200_000;
 pub(crate) struct Rows<'a> {
     ctx: &'a Context<'a>,
     tree: PolyTree,
-    /// Per polygon, the lower-numbered coincident same-facing polygons that overlap it:
-    /// they own the overlap ([`super::geom::coincident_twins`]), so another row sees the
-    /// overlap once (a two-sided box's bottom on the floor).
-    twins: Vec<Vec<u32>>,
+    /// [`Context::twins`]: they own their overlap, so another row sees it once (a
+    /// two-sided box's bottom on the floor).
+    twins: &'a [Vec<u32>],
 }
 
 impl<'a> Rows<'a> {
     pub fn new(ctx: &'a Context<'a>) -> Self {
-        let eps = 1e-7 * ctx.scene.diagonal();
-        Rows { ctx, tree: PolyTree::new(&ctx.scene.polygons), twins: super::geom::coincident_twins(&ctx.scene.polygons, eps) }
+        Rows { ctx, tree: PolyTree::new(&ctx.scene.polygons), twins: &ctx.twins }
     }
 }
 
@@ -327,13 +325,13 @@ impl Rows<'_> {
             None => vec![si],
         };
         let mut total = 0.0;
+        let twin_eps = 1e-7 * ctx.scene.diagonal();
         for part in &parts {
             for piece in &self.sender_pieces(part, ni, s) {
                 if let Some(t) = s.twin_sender {
                     // The overlap with a lower-numbered twin sends as that twin.
                     let c = piece.iter().copied().sum::<DVec3>() / piece.len() as f64;
-                    let eps = 1e-7 * ctx.scene.diagonal();
-                    if self.twins[t as usize].iter().any(|&o| super::geom::inside_convex(c, &polys[o as usize].vertices, polys[o as usize].normal, eps)) {
+                    if self.twins[t as usize].iter().any(|&o| super::geom::inside_convex(c, &polys[o as usize].vertices, polys[o as usize].normal, twin_eps)) {
                         continue;
                     }
                 }

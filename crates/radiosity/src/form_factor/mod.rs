@@ -415,6 +415,9 @@ pub(crate) struct Context<'a> {
     pub opts: &'a Options,
     /// Per patch: (a point of its plane, unit normal).
     pub planes: Vec<(DVec3, DVec3)>,
+    /// Per patch: the lower-numbered coincident same-facing patches that overlap it and
+    /// own the overlap ([`geom::coincident_twins`]; point-sampled and adaptive use it).
+    pub twins: Vec<Vec<u32>>,
     /// Per patch: how far its vertices may lie from its plane (the planarity tolerance
     /// that input polygons are accepted with, on its size, plus `eps`).
     pub flatness: Vec<f64>,
@@ -434,7 +437,8 @@ impl<'a> Context<'a> {
                 2.0 * crate::scene::PLANARITY_TOL * (hi - lo).length() + eps
             })
             .collect();
-        Context { scene, mesh, rays, receivers, opts, planes, flatness, eps }
+        let twins = geom::coincident_twins(&scene.polygons, 1e-7 * scene.diagonal());
+        Context { scene, mesh, rays, receivers, opts, planes, twins, flatness, eps }
     }
 
     /// Patches that can exchange light with patch `pi` at all: some vertex in front of

@@ -32,15 +32,32 @@ const BIG_PATCH: u32 = 8;
 
 pub(crate) struct Rows<'a> {
     ctx: &'a Context<'a>,
-    /// Per polygon: the lower-numbered coplanar, same-facing polygons that overlap it; a
-    /// visibility sample on the overlap belongs to them (see [`super::geom::coincident_twins`]).
-    twins: Vec<Vec<u32>>,
+    /// Per element of a patch with coincident twins ([`Context::twins`], the lower-numbered
+    /// coplanar, same-facing polygons that overlap it and own the overlap): its convex
+    /// overlaps with them, cut from its kernel; empty for every other element.
+    element_cuts: Vec<Vec<Vec<DVec3>>>,
+    /// The same per patch (for the exact patch factor of large patches).
+    patch_cuts: Vec<Vec<Vec<DVec3>>>,
 }
 
 impl<'a> Rows<'a> {
     pub fn new(ctx: &'a Context<'a>) -> Self {
-        let eps = 1e-7 * ctx.scene.diagonal();
-        Rows { ctx, twins: super::geom::coincident_twins(&ctx.scene.polygons, eps) }
+        let (scene, mesh) = (ctx.scene, ctx.mesh);
+        let patch_cuts: Vec<Vec<Vec<DVec3>>> =
+            scene.polygons.iter().zip(&ctx.twins).map(|(p, t)| if t.is_empty() { Vec::new() } else { overlaps(&p.vertices, t, scene, ctx.eps) }).collect();
+        let element_cuts = mesh
+            .elements
+            .iter()
+            .map(|e| {
+                let t = &ctx.twins[e.patch as usize];
+                if t.is_empty() {
+                    return Vec::new();
+                }
+                let (c, n) = e.corners(&mesh.positions);
+                overlaps(&c[..n], t, scene, ctx.eps)
+            })
+            .collect();
+        Rows { ctx, element_cuts, patch_cuts }
     }
 }
 
@@ -78,7 +95,7 @@ impl RowSource for Rows<'_> {
         let mut visibility = |x: DVec3, j: u32, q: u32, rng: &mut Rng, nrays: &mut u64| {
             let ej = &mesh.elements[j as usize];
             let owned_by_twin = |y: DVec3| {
-                self.twins[q as usize].iter().any(|&t| {
+                ctx.twins[q as usize].iter().any(|&t| {
                     let p = &scene.polygons[t as usize];
                     super::geom::inside_convex(y, &p.vertices, p.normal, eps)
                 })
@@ -149,9 +166,8 @@ impl RowSource for Rows<'_> {
             // factor to the whole patch (contour integral) — cheap and still exact in
             // total, which keeps closed rooms closed.
             let big = pe.count >= BIG_PATCH;
-            let twins_q = &self.twins[q as usize];
             let exact_q = if big {
-                let cut = overlaps(&poly_q.vertices, twins_q, scene, eps);
+                let cut = &self.patch_cuts[q as usize];
                 (point_to_polygon(c1, ei.normal, &poly_q.vertices, poly_q.normal)
                     - cut.iter().map(|o| point_to_polygon(c1, ei.normal, o, poly_q.normal)).sum::<f64>())
                 .max(0.0)
@@ -171,7 +187,7 @@ impl RowSource for Rows<'_> {
                 }
                 // The parts of j that lower-numbered coincident twins own are left out of
                 // its kernel exactly (contour integrals of the convex overlaps).
-                let cut = if twins_q.is_empty() { Vec::new() } else { overlaps(cj, twins_q, scene, eps) };
+                let cut = &self.element_cuts[j as usize];
                 let cut_fraction = (cut.iter().map(|o| super::geom::area_3d(o)).sum::<f64>() / ej.area).clamp(0.0, 1.0);
                 let kernel = |x: DVec3| {
                     let f = point_to_polygon(x, ei.normal, cj, ej.normal);

@@ -23,7 +23,7 @@ use rayon::prelude::*;
 use super::Mesh;
 use crate::accel::SceneRays;
 use crate::sampling::{basis, cosine_hemisphere, halton2};
-use crate::scene::Scene;
+use crate::scene::{newell_normal, Scene};
 
 /// Probe rays per receiver point.
 pub const PROBES: u32 = 8;
@@ -160,9 +160,11 @@ impl Receivers {
                         }
                     }
                     if !open.is_empty() {
-                        frac = open.len() as f64 / fine.len() as f64;
                         lv[MAX_K - 1] = open;
                         cells = mask;
+                        if mask == u64::MAX {
+                            frac = 1.0;
+                        }
                     } else {
                         // The fine grid found nothing open (a sliver around a 3 × 3
                         // point): the fine cells whose centres lie in an open 3 × 3 cell.
@@ -175,7 +177,6 @@ impl Receivers {
                                 cells |= 1 << b;
                             }
                         }
-                        frac = cells.count_ones() as f64 / (FINE_K * FINE_K) as f64;
                     }
                 }
                 // k = 1: the centroid when the whole element is open, else the open point
@@ -208,21 +209,14 @@ impl Receivers {
                     }
                     lv[0] = vec![e.centroid];
                 }
-                (lv, frac, cells)
-            })
-            .collect();
-        // Cells of a quad that is not a parallelogram differ in area: the open fraction
-        // of a partly covered element is the area of its open polygons, so that every
-        // method divides by the area it integrates over.
-        let res: Vec<_> = res
-            .into_iter()
-            .zip(&mesh.elements)
-            .map(|((p, f, c), e)| {
-                if c == 0 || c == u64::MAX || !(e.area > 0.0) {
-                    return (p, f, c);
+                // Cells of a quad that is not a parallelogram differ in area: the open
+                // fraction of a partly covered element is the area of its open polygons,
+                // so that every method divides by the area it integrates over.
+                if cells != 0 && cells != u64::MAX && e.area > 0.0 {
+                    let a: f64 = open_polygons(e, &mesh.positions, cells).iter().map(|q| 0.5 * newell_normal(q).length()).sum();
+                    frac = (a / e.area).clamp(0.0, 1.0);
                 }
-                let a: f64 = open_polygons(e, &mesh.positions, c).iter().map(|q| (1..q.len() - 1).map(|k| (q[k] - q[0]).cross(q[k + 1] - q[0]).dot(e.normal)).sum::<f64>() / 2.0).sum();
-                (p, (a / e.area).clamp(0.0, 1.0), c)
+                (lv, frac, cells)
             })
             .collect();
         let mut points = Vec::with_capacity(res.len());
@@ -280,12 +274,11 @@ pub fn open_polygons(el: &super::Element, positions: &[DVec3], m: u64) -> Vec<Ve
         .into_iter()
         .map(|(i0, i1, j0, j1)| {
             let (u0, u1, v0, v1) = (i0 as f64 / k, i1 as f64 / k, j0 as f64 / k, j1 as f64 / k);
-            let mut p: Vec<DVec3> = Vec::with_capacity(4);
-            for (u, v) in [(u0, v0), (u1, v0), (u1, v1), (u0, v1)] {
-                let x = el.point(positions, u, v);
-                if p.last().is_none_or(|q| *q != x) && p.first().is_none_or(|q| *q != x || p.len() < 2) {
-                    p.push(x);
-                }
+            let mut p: Vec<DVec3> = [(u0, v0), (u1, v0), (u1, v1), (u0, v1)].iter().map(|&(u, v)| el.point(positions, u, v)).collect();
+            // A triangle's u = 0 edge is its first corner: two corners coincide.
+            p.dedup();
+            if p.len() > 1 && p.first() == p.last() {
+                p.pop();
             }
             p
         })

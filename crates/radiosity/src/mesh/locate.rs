@@ -1,6 +1,6 @@
 //! Point location on the mesh: which element of a patch contains a point on that patch.
 //! Used wherever a ray hit on a scene polygon must become an element (the stochastic
-//! solvers' deposits, the coverage test's consistency pass).
+//! solvers' deposits).
 
 use glam::{DVec2, DVec3};
 
