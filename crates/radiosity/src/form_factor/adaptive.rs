@@ -22,6 +22,15 @@
 //!   planes) take the exact contour integral ([`super::analytic`]), as View3D takes its
 //!   analytic/line-integral path when nothing obstructs.
 //!
+//! - **Cost.** The few pairs deep in penumbra behind many occluders take most of the
+//!   time. Each sender region sorts its occluders by the size of their shadow from its
+//!   centroid, largest first, so the receiver is used up by few large cuts; an occluder
+//!   well below the point is projected without the pyramid clip, and one whose shadow
+//!   misses what is left is skipped; both rows of an expensive pair take its integral
+//!   once ([`PairCache`]); the tolerance and the evaluation budget hold per pair, over all
+//!   the sender's pieces, and pairs that stop at the budget are counted in a warning with
+//!   their estimated error.
+//!
 //! Unlike View3D's 1AI/2AI, the inner factor is exact under partial occlusion, which is
 //! where View3D's adaptive scheme (and every ray-sampled method) makes its largest
 //! errors; the only approximation is the outer cubature, controlled by the tolerance.
@@ -32,14 +41,14 @@ use std::collections::BinaryHeap;
 use glam::{DVec2, DVec3};
 
 use super::analytic;
-use super::geom::{area2_2d, bounds_3d, clip_halfspace, gauss_legendre, PieceSet, PlaneFrame};
+use super::geom::{area2_2d, bounds_2d, bounds_3d, clip_halfspace, gauss_legendre, PieceSet, PlaneFrame};
 use super::kernel::point_to_polygon_unsided;
 use super::{Context, RowSource};
 
 /// Default relative tolerance.
 pub const DEFAULT_TOLERANCE: f64 = 1e-5;
 /// Default evaluation budget per element pair.
-pub const DEFAULT_MAX_EVALUATIONS: usize = 200_000;
+pub const DEFAULT_MAX_EVALUATIONS: usize = 50_000;
 
 pub(crate) struct Rows<'a> {
     ctx: &'a Context<'a>,
@@ -47,11 +56,99 @@ pub(crate) struct Rows<'a> {
     /// [`Context::twins`]: they own their overlap, so another row sees it once (a
     /// two-sided box's bottom on the floor).
     twins: &'a [Vec<u32>],
+    /// `A_i F_ij` of expensive pairs, kept by the first of the two rows that needs it
+    /// for the other (see [`PairCache`]).
+    cache: PairCache,
+    /// Pairs that spent the evaluation budget before reaching the tolerance.
+    budget: BudgetHits,
 }
 
 impl<'a> Rows<'a> {
     pub fn new(ctx: &'a Context<'a>) -> Self {
-        Rows { ctx, tree: PolyTree::new(&ctx.scene.polygons), twins: &ctx.twins }
+        Rows { ctx, tree: PolyTree::new(&ctx.scene.polygons), twins: &ctx.twins, cache: PairCache::default(), budget: BudgetHits::default() }
+    }
+
+    /// `A_i F_ij` of a pair whose integral both rows take alike (see [`PairCache`]), from
+    /// the cache when the other row has computed it, else computed (and kept for the
+    /// other row if it was expensive).
+    fn shared_pair(&self, key: (u32, u32), s: &mut Scratch, compute: impl FnOnce(&mut Scratch) -> f64) -> f64 {
+        if let Some(af) = self.cache.take(key) {
+            return af;
+        }
+        let af = compute(s);
+        if s.evals >= PairCache::MIN_EVALUATIONS {
+            self.cache.put(key, af);
+        }
+        af
+    }
+}
+
+/// Pairs whose integral stopped at the evaluation budget, with the sums of their values
+/// and error estimates (`A_i F_ij`), for a warning that says how much it matters.
+#[derive(Default)]
+struct BudgetHits(std::sync::Mutex<(u64, f64, f64)>);
+
+impl BudgetHits {
+    fn record(&self, value: f64, err: f64) {
+        let mut g = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        g.0 += 1;
+        g.1 += value.abs();
+        g.2 += err;
+    }
+
+    /// The warning, if any pair stopped at the budget. `total` is `Σ A_i` of the rows
+    /// computed (the most `Σ A_i F_ij` can be), to put the error in proportion.
+    fn warning(&self, max_evaluations: usize, total: f64) -> Option<String> {
+        let (n, value, err) = *self.0.lock().unwrap_or_else(|e| e.into_inner());
+        (n > 0).then(|| {
+            format!(
+                "adaptive form factors: {n} pair(s) stopped at the budget of {max_evaluations} evaluations before the \
+                 tolerance, with estimated error {err:.3e} on A·F {value:.3e} ({:.2e} of the rows' total)",
+                err / total.max(f64::MIN_POSITIVE)
+            )
+        })
+    }
+}
+
+impl Rows<'_> {
+    /// See [`BudgetHits::warning`].
+    pub fn budget_warning(&self, total_area: f64) -> Option<String> {
+        self.budget.warning(self.ctx.opts.adaptive_max_evaluations, total_area)
+    }
+}
+
+impl PolygonRows<'_> {
+    /// See [`BudgetHits::warning`].
+    pub fn budget_warning(&self, total_area: f64) -> Option<String> {
+        self.rows.budget_warning(total_area)
+    }
+}
+
+/// Pair integrals shared by the two rows of a pair. `A_i F_ij = A_j F_ji` is one integral
+/// (taken over the smaller element, [`Rows::pair`]), and row `j` would take it again;
+/// when neither element is partly covered and neither polygon has coincident twins, both
+/// rows integrate the same region over the same receiver, so the first keeps its result
+/// for the second, which takes it out. Only pairs that cost at least
+/// [`PairCache::MIN_EVALUATIONS`] integrand evaluations are kept (the few in deep
+/// penumbra, which take most of the time), so the cache stays small.
+#[derive(Default)]
+struct PairCache {
+    shards: [std::sync::Mutex<std::collections::HashMap<(u32, u32), f64>>; 16],
+}
+
+impl PairCache {
+    const MIN_EVALUATIONS: usize = 1000;
+
+    fn shard(&self, key: (u32, u32)) -> &std::sync::Mutex<std::collections::HashMap<(u32, u32), f64>> {
+        &self.shards[(key.0 ^ key.1.rotate_left(7)) as usize % self.shards.len()]
+    }
+
+    fn take(&self, key: (u32, u32)) -> Option<f64> {
+        self.shard(key).lock().unwrap_or_else(|e| e.into_inner()).remove(&key)
+    }
+
+    fn put(&self, key: (u32, u32), af: f64) {
+        self.shard(key).lock().unwrap_or_else(|e| e.into_inner()).insert(key, af);
     }
 }
 
@@ -73,6 +170,8 @@ pub(crate) struct Scratch {
     /// The polygon integrated over when it is not the row's own (then its overlaps with
     /// lower-numbered twins do not send).
     twin_sender: Option<u32>,
+    /// Integrand evaluations spent on the current pair.
+    evals: usize,
 }
 
 #[derive(Default)]
@@ -110,7 +209,10 @@ impl<'p> Receiver<'p> {
         }
         let area = 0.5 * area2_2d(&outline).abs();
         let size = area.sqrt();
-        let (eps2, min_area) = (1e-12 * size, 1e-14 * area);
+        // Visible pieces below 1e-10 of the receiver are dropped: slivers between the
+        // shadows of adjacent occluder faces (a shared edge projected twice, a hair apart)
+        // otherwise multiply with every later cut, to thousands of pieces at one point.
+        let (eps2, min_area) = (1e-12 * size, 1e-10 * area);
         let centroid = verts.iter().copied().sum::<DVec3>() / verts.len() as f64;
         let mut start = PieceSet::default();
         start.push(&outline);
@@ -162,8 +264,14 @@ impl RowSource for Rows<'_> {
             for j in pe.first..pe.first + pe.count {
                 let ej = &mesh.elements[j as usize];
                 let (cj, nj) = ctx.corners(j as usize);
-                s.cover = (partly(oi).then_some(i as u32), partly(open(j as usize)).then_some(j));
-                let af = self.pair(ci, ei.normal, ei.patch, &cj[..nj], ej.normal, q, s);
+                let oj = open(j as usize);
+                s.cover = (partly(oi).then_some(i as u32), partly(oj).then_some(j));
+                let pair = |s: &mut Scratch| self.pair(ci, ei.normal, ei.patch, &cj[..nj], ej.normal, q, s);
+                let af = if j as usize != i && !partly(oi) && !partly(oj) && self.twins[ei.patch as usize].is_empty() && self.twins[q as usize].is_empty() {
+                    self.shared_pair(((i as u32).min(j), (i as u32).max(j)), s, pair)
+                } else {
+                    pair(s)
+                };
                 if af != 0.0 {
                     out.push((j, af / area_i));
                 }
@@ -200,7 +308,13 @@ impl RowSource for PolygonRows<'_> {
         let patches = std::mem::take(&mut s.patches);
         for &q in &patches {
             let pq = &polys[q as usize];
-            let af = self.rows.pair(&pp.vertices, pp.normal, p as u32, &pq.vertices, pq.normal, q, s);
+            let pair = |s: &mut Scratch| self.rows.pair(&pp.vertices, pp.normal, p as u32, &pq.vertices, pq.normal, q, s);
+            let twins = self.rows.twins;
+            let af = if q as usize != p && twins[p].is_empty() && twins[q as usize].is_empty() {
+                self.rows.shared_pair(((p as u32).min(q), (p as u32).max(q)), s, pair)
+            } else {
+                pair(s)
+            };
             if af != 0.0 {
                 out.push((q, af / pp.area));
             }
@@ -232,6 +346,7 @@ impl Rows<'_> {
                 CmpOrdering::Equal => (pj[0].x, pj[0].y, pj[0].z) < (pi[0].x, pi[0].y, pi[0].z),
             };
         s.cover_sender = if swap { s.cover.1 } else { s.cover.0 };
+        s.evals = 0;
         s.twin_sender = (swap && !self.twins[patch_j as usize].is_empty()).then_some(patch_j);
         if swap {
             self.pair_directed(pj, nj, patch_j, pi, ni, patch_i, s)
@@ -324,10 +439,10 @@ impl Rows<'_> {
                 .collect(),
             None => vec![si],
         };
-        let mut total = 0.0;
         let twin_eps = 1e-7 * ctx.scene.diagonal();
+        let mut pieces = Vec::new();
         for part in &parts {
-            for piece in &self.sender_pieces(part, ni, s) {
+            for piece in self.sender_pieces(part, ni, s) {
                 if let Some(t) = s.twin_sender {
                     // The overlap with a lower-numbered twin sends as that twin.
                     let c = piece.iter().copied().sum::<DVec3>() / piece.len() as f64;
@@ -335,10 +450,10 @@ impl Rows<'_> {
                         continue;
                     }
                 }
-                total += self.integrate(piece, ni, &recv, min_level, s);
+                pieces.push(piece);
             }
         }
-        total
+        self.integrate(&pieces, ni, &recv, min_level, s)
     }
 
     /// The sender cut into convex pieces along every line where an occluder meets its
@@ -395,30 +510,33 @@ impl Rows<'_> {
         (0..set.len()).map(|k| set.piece(k).iter().map(|q| frame.to_3d(*q)).collect()).collect()
     }
 
-    /// Adaptive cubature of `F(dA_x → V_j(x))` over the sender. Each region keeps the
-    /// occluders that can still reach the shaft between it and the receiver; a region left
-    /// with none is integrated exactly (contour integral, error 0), so only regions in
-    /// penumbra are ever refined, and each evaluation there clips only its own occluders.
-    fn integrate(&self, pi: &[DVec3], ni: DVec3, recv: &Receiver, min_level: u32, s: &mut Scratch) -> f64 {
+    /// Adaptive cubature of `F(dA_x → V_j(x))` over the sender's convex pieces, one error
+    /// budget and one evaluation budget for them all. Each region keeps the occluders that
+    /// can still reach the shaft between it and the receiver; a region left with none is
+    /// integrated exactly (contour integral, error 0), so only regions in penumbra are ever
+    /// refined, and each evaluation there clips only its own occluders.
+    fn integrate(&self, pieces: &[Vec<DVec3>], ni: DVec3, recv: &Receiver, min_level: u32, s: &mut Scratch) -> f64 {
         let opts = self.ctx.opts;
-        let area_i = super::geom::area_3d(pi);
-        let Scratch { occ, eval, heap, an, rshaft, .. } = s;
+        let area_i: f64 = pieces.iter().map(|p| super::geom::area_3d(p)).sum();
+        let Scratch { occ, eval, heap, an, rshaft, .. } = &mut *s;
         heap.clear();
         let mut evals = 0usize;
         let mut total = 0.0;
         let mut err = 0.0;
         let mut ctx = RegionCtx { rows: self, ni, recv, eval, an, shaft: rshaft };
-        for k in 1..pi.len() - 1 {
-            let tri = [pi[0], pi[k], pi[k + 1]];
-            let mut todo = vec![tri];
-            for _ in 0..min_level {
-                todo = todo.iter().flat_map(split4).collect();
-            }
-            for t in todo {
-                let r = ctx.eval(t, occ, &mut evals);
-                total += r.est;
-                err += r.err;
-                heap.push(r);
+        for pi in pieces {
+            for k in 1..pi.len() - 1 {
+                let tri = [pi[0], pi[k], pi[k + 1]];
+                let mut todo = vec![tri];
+                for _ in 0..min_level {
+                    todo = todo.iter().flat_map(split4).collect();
+                }
+                for t in todo {
+                    let r = ctx.eval(t, occ, &mut evals);
+                    total += r.est;
+                    err += r.err;
+                    heap.push(r);
+                }
             }
         }
         let tol = opts.adaptive_tolerance;
@@ -430,7 +548,11 @@ impl Rows<'_> {
                 total = t;
                 err = e;
                 let target = (tol * total.abs()).max(tol * 1e-3 * area_i);
-                if err <= target || evals + 4 * EVALS_PER_REGION > opts.adaptive_max_evaluations {
+                if err <= target {
+                    break;
+                }
+                if evals + 4 * EVALS_PER_REGION > opts.adaptive_max_evaluations {
+                    self.budget.record(total, err);
                     break;
                 }
             }
@@ -448,7 +570,66 @@ impl Rows<'_> {
                 heap.push(r);
             }
         }
+        s.evals += evals;
         total
+    }
+
+    /// Pyramid side planes through `x` and each receiver edge, oriented inwards.
+    fn pyramid(x: DVec3, recv: &Receiver, sides: &mut Vec<DVec3>) {
+        sides.clear();
+        let m = recv.verts.len();
+        for k in 0..m {
+            let (a, b) = (recv.verts[k], recv.verts[(k + 1) % m]);
+            let mut pn = (a - x).cross(b - x);
+            if pn.dot(recv.centroid - x) < 0.0 {
+                pn = -pn;
+            }
+            sides.push(pn);
+        }
+    }
+
+    /// The shadow of occluder `o` from `x` (at height `dx` above the receiver's plane) on
+    /// the receiver's plane, counter-clockwise in `s.shadow`; false if it has no area.
+    ///
+    /// With `always_clip`, it is clipped to the pyramid over the receiver
+    /// ([`Self::pyramid`], in `s.sides`). Otherwise the pyramid is used only where it is
+    /// needed: an occluder that lies well below `x` (every point under 0.999 `dx`) projects
+    /// to a convex polygon of bounded size, and cutting the receiver's pieces by all of it
+    /// cuts them by its part inside the pyramid. (Points at or above `x`'s height never
+    /// block: a segment from `x` down to the receiver stays below it; an occluder that
+    /// reaches close to that height takes the pyramid, whose clip keeps its shadow finite.)
+    fn shadow(&self, x: DVec3, dx: f64, o: u32, recv: &Receiver, always_clip: bool, s: &mut EvalScratch) -> bool {
+        let fr = &recv.frame;
+        let height = |q: &DVec3| fr.n.dot(*q - fr.origin);
+        clip_halfspace(&self.ctx.scene.polygons[o as usize].vertices, |p| height(&p), 0.0, &mut s.a);
+        if always_clip || s.a.iter().any(|q| height(q) > 0.999 * dx) {
+            for pn in &s.sides {
+                if s.a.is_empty() {
+                    break;
+                }
+                clip_halfspace(&s.a, |p| pn.dot(p - x), 0.0, &mut s.b);
+                std::mem::swap(&mut s.a, &mut s.b);
+            }
+        }
+        // Central projection from x onto the receiver plane.
+        s.shadow.clear();
+        for q in &s.a {
+            let den = dx - height(q);
+            if den > 0.0 {
+                s.shadow.push(fr.to_2d(x + (*q - x) * (dx / den)));
+            }
+        }
+        if s.shadow.len() < 3 {
+            return false;
+        }
+        let a2 = area2_2d(&s.shadow);
+        if a2.abs() <= 2.0 * recv.min_area {
+            return false;
+        }
+        if a2 < 0.0 {
+            s.shadow.reverse();
+        }
+        true
     }
 
     /// `F(dA_x → V_j(x))`: the exact factor from the point to the receiver's visible part.
@@ -461,61 +642,26 @@ impl Rows<'_> {
         if occ.is_empty() {
             return recv.pieces.iter().map(|p| point_to_polygon_unsided(x, nx, p)).sum();
         }
-        // Pyramid side planes through x and each receiver edge, oriented inwards.
-        s.sides.clear();
-        let m = recv.verts.len();
-        for k in 0..m {
-            let (a, b) = (recv.verts[k], recv.verts[(k + 1) % m]);
-            let mut pn = (a - x).cross(b - x);
-            if pn.dot(recv.centroid - x) < 0.0 {
-                pn = -pn;
-            }
-            s.sides.push(pn);
-        }
+        Self::pyramid(x, recv, &mut s.sides);
         s.pieces.clear();
         for k in 0..recv.start.len() {
             s.pieces.push(recv.start.piece(k));
         }
-        let polys = &self.ctx.scene.polygons;
+        let (mut plo, mut phi) = s.pieces.bounds();
         for &o in occ {
-            // Clip the occluder to the receiver's front half-space and the pyramid.
-            clip_halfspace(&polys[o as usize].vertices, |p| fr.n.dot(p - fr.origin), 0.0, &mut s.a);
-            for pn in &s.sides {
-                if s.a.is_empty() {
-                    break;
-                }
-                clip_halfspace(&s.a, |p| pn.dot(p - x), 0.0, &mut s.b);
-                std::mem::swap(&mut s.a, &mut s.b);
-            }
-            if s.a.is_empty() {
+            if !self.shadow(x, dx, o, recv, false, s) {
                 continue;
             }
-            // Central projection from x onto the receiver plane.
-            s.shadow.clear();
-            for q in &s.a {
-                let dq = fr.n.dot(*q - fr.origin);
-                let den = dx - dq;
-                if den <= 0.0 {
-                    continue;
-                }
-                let y = x + (*q - x) * (dx / den);
-                s.shadow.push(fr.to_2d(y));
-            }
-            if s.shadow.len() < 3 {
+            let (lo, hi) = bounds_2d(&s.shadow);
+            if lo.x >= phi.x || lo.y >= phi.y || hi.x <= plo.x || hi.y <= plo.y {
                 continue;
-            }
-            let a2 = area2_2d(&s.shadow);
-            if a2.abs() <= 2.0 * recv.min_area {
-                continue;
-            }
-            if a2 < 0.0 {
-                s.shadow.reverse();
             }
             s.pieces.subtract(&s.shadow, recv.eps2, recv.min_area, &mut s.next, &mut s.tmp2);
             std::mem::swap(&mut s.pieces, &mut s.next);
             if s.pieces.is_empty() {
                 return 0.0;
             }
+            (plo, phi) = s.pieces.bounds();
         }
         let mut f = 0.0;
         for k in 0..s.pieces.len() {
@@ -588,7 +734,7 @@ impl RegionCtx<'_, '_> {
         let eps = self.rows.ctx.eps;
         shaft_planes(&tri, self.recv.verts, eps, self.shaft);
         let polys = &self.rows.ctx.scene.polygons;
-        let occ: Vec<u32> = parent_occ
+        let mut occ: Vec<u32> = parent_occ
             .iter()
             .copied()
             .filter(|&o| {
@@ -596,6 +742,7 @@ impl RegionCtx<'_, '_> {
                 !self.shaft.iter().any(|(n, d)| v.iter().all(|p| n.dot(*p) - d <= eps))
             })
             .collect();
+        self.order(&tri, &mut occ);
         if occ.is_empty() {
             let est = self.recv.pieces.iter().map(|p| analytic::area_factor_with(self.an, &tri, self.ni, p, self.recv.normal)).sum();
             return Region { tri, est, err: 0.0, occ };
@@ -616,6 +763,36 @@ impl RegionCtx<'_, '_> {
         let lo = rule(3);
         let hi = rule(4);
         Region { tri, est: hi, err: (hi - lo).abs(), occ }
+    }
+}
+
+impl RegionCtx<'_, '_> {
+    /// Sorts the occluders by the area of their shadow on the receiver seen from the
+    /// region's centroid, largest first: the receiver is then used up by few large cuts
+    /// (and a point that sees nothing stops early) instead of being cut into many small
+    /// pieces first.
+    fn order(&mut self, tri: &[DVec3; 3], occ: &mut [u32]) {
+        if occ.len() < 2 {
+            return;
+        }
+        let x = (tri[0] + tri[1] + tri[2]) / 3.0;
+        let fr = &self.recv.frame;
+        let dx = fr.n.dot(x - fr.origin);
+        if dx <= 0.0 {
+            return;
+        }
+        Rows::pyramid(x, self.recv, &mut self.eval.sides);
+        let mut keyed: Vec<(f64, u32)> = occ
+            .iter()
+            .map(|&o| {
+                let a = if self.rows.shadow(x, dx, o, self.recv, true, self.eval) { area2_2d(&self.eval.shadow) } else { 0.0 };
+                (a, o)
+            })
+            .collect();
+        keyed.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        for (slot, (_, o)) in occ.iter_mut().zip(keyed) {
+            *slot = o;
+        }
     }
 }
 

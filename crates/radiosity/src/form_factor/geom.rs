@@ -157,6 +157,10 @@ impl PieceSet {
         let (a, b) = self.ranges[k];
         &self.pts[a as usize..b as usize]
     }
+    /// Axis-aligned bounds of all pieces.
+    pub fn bounds(&self) -> (DVec2, DVec2) {
+        bounds_2d(&self.pts)
+    }
     /// Total area.
     pub fn area(&self) -> f64 {
         (0..self.len()).map(|k| 0.5 * area2_2d(self.piece(k)).abs()).sum()
@@ -358,6 +362,50 @@ mod tests {
         assert!(out.is_empty());
         s.subtract(&sq(5.0, 6.0), 1e-12, 0.0, &mut out, &mut tmp);
         assert!((out.area() - 16.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn subtracting_a_cutter_twice_removes_nothing_more() {
+        // Pseudo-random convex cutters (triangles and quads) over a unit square.
+        let mut seed = 12345u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let sq = vec![DVec2::new(0.0, 0.0), DVec2::new(1.0, 0.0), DVec2::new(1.0, 1.0), DVec2::new(0.0, 1.0)];
+        let mut tmp = [Vec::new(), Vec::new()];
+        let mut worst: f64 = 0.0;
+        for _ in 0..200 {
+            let mut set = PieceSet::default();
+            set.push(&sq);
+            let mut cutters = Vec::new();
+            for _ in 0..6 {
+                let c = DVec2::new(rnd() * 1.4 - 0.2, rnd() * 1.4 - 0.2);
+                let r = 0.05 + 0.4 * rnd();
+                let n = 3 + (rnd() * 2.0) as usize;
+                let a0 = rnd() * 6.28;
+                let mut poly: Vec<DVec2> = (0..n).map(|k| c + r * DVec2::from_angle(a0 + k as f64 * std::f64::consts::TAU / n as f64)).collect();
+                if area2_2d(&poly) < 0.0 {
+                    poly.reverse();
+                }
+                cutters.push(poly);
+            }
+            let mut once = set.clone();
+            let mut next = PieceSet::default();
+            for c in &cutters {
+                once.subtract(c, 1e-12, 1e-14, &mut next, &mut tmp);
+                std::mem::swap(&mut once, &mut next);
+            }
+            let mut twice = set.clone();
+            for c in &cutters {
+                for _ in 0..2 {
+                    twice.subtract(c, 1e-12, 1e-14, &mut next, &mut tmp);
+                    std::mem::swap(&mut twice, &mut next);
+                }
+            }
+            worst = worst.max((once.area() - twice.area()).abs());
+        }
+        assert!(worst < 1e-12, "{worst}");
     }
 
     #[test]

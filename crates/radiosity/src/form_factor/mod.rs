@@ -330,7 +330,13 @@ pub fn for_each_row(
         }
         Method::PointSampled => drive(&point_sampled::Rows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?,
         Method::MonteCarlo => drive(&monte_carlo::Rows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?,
-        Method::Adaptive => drive(&adaptive::Rows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?,
+        Method::Adaptive => {
+            let rows = adaptive::Rows::new(&ctx);
+            let r = drive(&rows, which, opts.method.row_sum_slack(), progress, sink)?;
+            let area: f64 = which.iter().map(|&i| mesh.elements[i as usize].area).sum();
+            push_warning(rows.budget_warning(area), progress, &mut warnings);
+            r
+        }
     };
     if let Some(i) = guard.worst_row {
         guard.worst_source = mesh.elements.get(i).and_then(|e| scene.polygons[e.patch as usize].loc.as_ref()).map(|l| l.to_string());
@@ -378,7 +384,11 @@ pub fn for_each_polygon_row(
         warn_occlusion(scene, progress, &mut warnings);
         drive(&analytic_rows::PolygonRows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?
     } else {
-        drive(&adaptive::PolygonRows::new(&ctx), which, opts.method.row_sum_slack(), progress, sink)?
+        let rows = adaptive::PolygonRows::new(&ctx);
+        let r = drive(&rows, which, opts.method.row_sum_slack(), progress, sink)?;
+        let area: f64 = which.iter().map(|&p| scene.polygons[p as usize].area).sum();
+        push_warning(rows.budget_warning(area), progress, &mut warnings);
+        r
     };
     if let Some(p) = guard.worst_row {
         guard.worst_source = scene.polygons.get(p).and_then(|p| p.loc.as_ref()).map(|l| l.to_string());
@@ -388,7 +398,12 @@ pub fn for_each_polygon_row(
 }
 
 fn guard_warning(guard: &RowGuard, progress: &dyn Progress, warnings: &mut Vec<String>) {
-    if let Some(w) = guard.warning() {
+    push_warning(guard.warning(), progress, warnings);
+}
+
+/// Shows `w` (if any) and keeps it for the report.
+fn push_warning(w: Option<String>, progress: &dyn Progress, warnings: &mut Vec<String>) {
+    if let Some(w) = w {
         progress.message(&format!("warning: {w}"));
         warnings.push(w);
     }
