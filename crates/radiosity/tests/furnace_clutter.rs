@@ -246,6 +246,7 @@ pub fn check_furnace_with(name: &str, scene: Scene, method: Method, mesh_size: f
     for w in &cmp.solved.ff_stats.as_ref().unwrap().warnings {
         eprintln!("  {w}");
     }
+    let mut failures = Vec::new();
     for run in &cmp.runs {
         let sol = run.outcome.as_ref().unwrap_or_else(|e| panic!("{name} {} {}: {e}", method.name(), run.solver));
         let b = &sol.radiosity;
@@ -305,19 +306,24 @@ pub fn check_furnace_with(name: &str, scene: Scene, method: Method, mesh_size: f
             // model see only the back of the model's inward-wound walls, so the coverage
             // test calls most of them covered; the stochastic solvers send and receive
             // through open cells only, and the walls' partly covered elements lose the
-            // light of their covered cells (office2: up to 1.1 % low). Held to 2 %.
+            // light of their covered cells (office2: up to 1.1 % low). Adaptive factors
+            // integrate a partly covered receiver over its open cells, so the model's
+            // outside misses the walls' covered cells (office2: a wall 1.65 % low).
+            // Held to 2 % there.
             let room_wall = model && cmp.solved.scene.objects[cmp.solved.scene.polygons[pi as usize].object as usize].name == "furnace-room";
-            let allowed = if run.solver.is_stochastic() && room_wall { 0.02 } else { 0.01 };
-            assert!(
-                off <= allowed,
-                "{name} {} {}: free surface {} is {:.3} % off 2π",
-                method.name(),
-                run.solver,
-                radiosity::pipeline::element_place(&cmp.solved.scene, mesh, pe.first as usize),
-                100.0 * off
-            );
+            let allowed = if (run.solver.is_stochastic() || method == Method::Adaptive) && room_wall { 0.02 } else { 0.01 };
+            if off > allowed {
+                failures.push(format!(
+                    "{name} {} {}: free surface {} is {:.3} % off 2π",
+                    method.name(),
+                    run.solver,
+                    radiosity::pipeline::element_place(&cmp.solved.scene, mesh, pe.first as usize),
+                    100.0 * off
+                ));
+            }
         }
     }
+    assert!(failures.is_empty(), "{} surface(s) off:\n{}", failures.len(), failures.join("\n"));
 }
 
 macro_rules! furnace_tests {
@@ -398,13 +404,15 @@ macro_rules! model_furnace_tests {
 
 // office2 and the classroom at diag/12 (2,130 and 12,458 elements; the classroom takes
 // 37 s point-sampled, 31 s Monte Carlo and 147 s hemicube with every solver on two cores).
-// Adaptive integration on them runs with `--ignored`: office2 did not finish in 25 minutes
-// at diag/12 nor in 12 minutes at diag/6 on two cores (2026-12-01).
+// Adaptive integration: office2 at diag/6 (1,190 elements) in 378 s on two cores
+// (2026-12-01; before the pair cache and occluder ordering it had not finished in 12
+// minutes). The classroom (10,500 polygons, two-sided) runs with `--ignored`: at office2's
+// cost per pair it would take hours.
 model_furnace_tests! {
     furnace_office2_point_sampled: "scenes/renderpark-office2/office2.obj", Method::PointSampled, 12.0;
     furnace_office2_monte_carlo: "scenes/renderpark-office2/office2.obj", Method::MonteCarlo, 12.0;
     furnace_office2_hemicube: "scenes/renderpark-office2/office2.obj", Method::Hemicube, 12.0;
-    #[ignore] furnace_office2_adaptive: "scenes/renderpark-office2/office2.obj", Method::Adaptive, 6.0;
+    furnace_office2_adaptive: "scenes/renderpark-office2/office2.obj", Method::Adaptive, 6.0;
     furnace_classroom_point_sampled: "scenes/renderpark-classroom/classroom.obj", Method::PointSampled, 12.0;
     furnace_classroom_monte_carlo: "scenes/renderpark-classroom/classroom.obj", Method::MonteCarlo, 12.0;
     furnace_classroom_hemicube: "scenes/renderpark-classroom/classroom.obj", Method::Hemicube, 12.0;
@@ -413,7 +421,7 @@ model_furnace_tests! {
 
 /// Diagnostic, run by hand: the rows of a real model in the furnace room, computed alone.
 /// `MODEL` (default office2), `FRAC` (mesh size = diagonal / FRAC, default 6), `ROWS`
-/// (comma-separated element indices), `TOL` (adaptive tolerance, default 1e-3), `METHOD`.
+/// (comma-separated element indices) or `PATCH` (a polygon's elements), `TOL` (adaptive tolerance, default 1e-3), `METHOD`.
 #[test]
 #[ignore]
 fn model_rows() {
@@ -426,7 +434,28 @@ fn model_rows() {
     let mut opts = radiosity::form_factor::Options::default();
     opts.method = std::env::var("METHOD").ok().and_then(|m| m.parse::<Method>().ok()).unwrap_or(Method::Adaptive);
     opts.adaptive_tolerance = std::env::var("TOL").ok().and_then(|x| x.parse().ok()).unwrap_or(1e-3);
-    let rows: Vec<u32> = std::env::var("ROWS").unwrap_or_else(|_| "0".into()).split(',').map(|x| x.trim().parse().unwrap()).collect();
+    // `LOW=x`: every row, listing those summing below x (a closed furnace sums to 1).
+    let low: Option<f64> = std::env::var("LOW").ok().and_then(|x| x.parse().ok());
+    if let Some(low) = low {
+        let mut n = 0;
+        radiosity::form_factor::for_each_row(&scene, &mesh, &rays, &receivers, &opts, None, &NoProgress, &mut |i, row| {
+            let sum: f64 = row.iter().map(|x| x.1).sum();
+            if sum < low {
+                n += 1;
+                println!("low row {i} sum {sum:.5} open {:.4} ({})", receivers.open_fraction[i], radiosity::pipeline::element_place(&scene, &mesh, i));
+            }
+            Ok(())
+        })
+        .unwrap();
+        println!("{n} rows below {low} of {}", mesh.len());
+        return;
+    }
+    let mut rows: Vec<u32> = std::env::var("ROWS").unwrap_or_else(|_| "0".into()).split(',').map(|x| x.trim().parse().unwrap()).collect();
+    // `PATCH=p`: every element of polygon p instead.
+    if let Some(p) = std::env::var("PATCH").ok().and_then(|x| x.parse::<usize>().ok()) {
+        let pe = mesh.patches[p];
+        rows = (pe.first..pe.first + pe.count).collect();
+    }
     radiosity::form_factor::for_each_row(&scene, &mesh, &rays, &receivers, &opts, Some(&rows), &NoProgress, &mut |i, row| {
         let e = &mesh.elements[i];
         let sum: f64 = row.iter().map(|x| x.1).sum();
