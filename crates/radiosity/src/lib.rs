@@ -22,8 +22,10 @@
 
 pub mod accel;
 pub mod back_faces;
+pub mod direct;
 pub mod error;
 pub mod form_factor;
+pub mod geom;
 pub mod mesh;
 pub mod output;
 pub mod pipeline;

@@ -558,7 +558,7 @@ impl Solved {
         let h: Vec<Rgb> = match &self.transport {
             Some(f) => indirect_irradiance(&self.scene, &self.mesh, f, &self.solution),
             None => {
-                let ems = gather::emitters(&self.scene);
+                let ems = crate::direct::emitters(&self.scene);
                 let mut rng = crate::sampling::rng_for(0x1d1, 0);
                 let mut pts = Vec::new();
                 (0..b.len())
@@ -568,7 +568,7 @@ impl Solved {
                         let total = ((b[i] - emission[i]) / rho[i].max(Rgb::splat(1e-6))).max(Rgb::ZERO);
                         crate::sampling::stratified(4, &mut rng, &mut pts);
                         let (hd, _) =
-                            gather::direct_irradiance(&self.scene, &self.rays, &ems, x, e.normal, e.patch, |_| &pts);
+                            crate::direct::direct_irradiance(&self.scene, &self.rays, &ems, x, e.normal, e.patch, |_| &pts);
                         (total - hd).max(Rgb::ZERO)
                     })
                     .collect()

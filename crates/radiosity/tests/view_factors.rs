@@ -274,13 +274,13 @@ fn obstruction_only_surfaces_block_but_have_no_row() {
     // (z = 1) wherever x' < 1 − x, so F = ∫∫ F(dA → [1 − x, 1] × [0, 1]) dx dy, a smooth
     // integrand: Gauss–Legendre on 32 × 32 points (on [0, 1]) is exact to far below 1e-9.
     use glam::DVec3;
-    let gl = radiosity::form_factor::geom::gauss_legendre(32);
+    let gl = radiosity::geom::gauss_legendre(32);
     let mut exact = 0.0;
     for &(x, wx) in gl {
         for &(y, wy) in gl {
             let x0 = 1.0 - x;
             let top = [DVec3::new(x0, 0.0, 1.0), DVec3::new(x0, 1.0, 1.0), DVec3::new(1.0, 1.0, 1.0), DVec3::new(1.0, 0.0, 1.0)];
-            exact += wx * wy * radiosity::form_factor::kernel::point_to_polygon(DVec3::new(x, y, 0.0), DVec3::Z, &top, -DVec3::Z);
+            exact += wx * wy * radiosity::geom::kernel::point_to_polygon(DVec3::new(x, y, 0.0), DVec3::Z, &top, -DVec3::Z);
         }
     }
     let got = o.matrix.get(0, 1);

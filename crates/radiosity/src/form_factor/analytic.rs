@@ -212,7 +212,7 @@ fn hfun(z: f64, h: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::form_factor::kernel::point_to_polygon;
+    use crate::geom::kernel::point_to_polygon;
 
     fn v(x: f64, y: f64, z: f64) -> DVec3 {
         DVec3::new(x, y, z)
@@ -264,7 +264,7 @@ mod tests {
                 sum += wx * wy * x * point_to_polygon(p, na, &b, nb);
             }
         }
-        let area = crate::form_factor::geom::area_3d(&a);
+        let area = crate::geom::area_3d(&a);
         let quad = sum * 2.0 * area;
         assert!(exact > 0.0);
         assert!((exact - quad).abs() < 1e-12 * exact, "{exact} vs {quad}");

@@ -33,11 +33,10 @@ pub mod adaptive;
 pub mod analytic;
 pub mod diagnostics;
 pub mod enclosure;
-pub mod geom;
 pub mod hemicube;
-pub mod kernel;
 pub mod monte_carlo;
 mod point_sampled;
+mod twins;
 
 use std::str::FromStr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -47,6 +46,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::accel::SceneRays;
+use crate::geom::{self, kernel};
 use crate::mesh::coverage::MAX_K;
 use crate::mesh::{Mesh, Receivers};
 use crate::scene::Scene;
@@ -431,7 +431,7 @@ pub(crate) struct Context<'a> {
     /// Per patch: (a point of its plane, unit normal).
     pub planes: Vec<(DVec3, DVec3)>,
     /// Per patch: the lower-numbered coincident same-facing patches that overlap it and
-    /// own the overlap ([`geom::coincident_twins`]; point-sampled and adaptive use it).
+    /// own the overlap ([`twins::coincident_twins`]; point-sampled and adaptive use it).
     pub twins: Vec<Vec<u32>>,
     /// Per patch: how far its vertices may lie from its plane (the planarity tolerance
     /// that input polygons are accepted with, on its size, plus `eps`).
@@ -452,7 +452,7 @@ impl<'a> Context<'a> {
                 2.0 * crate::scene::PLANARITY_TOL * (hi - lo).length() + eps
             })
             .collect();
-        let twins = geom::coincident_twins(&scene.polygons, 1e-7 * scene.diagonal());
+        let twins = twins::coincident_twins(&scene.polygons, 1e-7 * scene.diagonal());
         Context { scene, mesh, rays, receivers, opts, planes, twins, flatness, eps }
     }
 

@@ -12,7 +12,7 @@
 //! threshold of 0.1 means "a tenth of the average brightness"):
 //! - *a priori, direct light* ([`a_priori_errors`]): the reflected direct exitance `ρ·H_d`
 //!   (exact point-to-polygon factor times ray-sampled visibility of every emitter,
-//!   [`crate::render::gather::direct_irradiance`], the same stratified shadow rays at every
+//!   [`crate::direct::direct_irradiance`], the same stratified shadow rays at every
 //!   point so that differences show light, not noise) near the corners, near the edge
 //!   midpoints and at the centroid; the error is the largest difference between a midpoint
 //!   or centre value and the (bi)linear interpolation of the corner values there — what
@@ -80,7 +80,7 @@ use rayon::prelude::*;
 
 use super::{Element, Mesh, PatchElements, Receivers, NO_VERTEX};
 use crate::accel::SceneRays;
-use crate::render::gather::{direct_irradiance, emitters};
+use crate::direct::{direct_irradiance, emitters};
 use crate::sampling::{rng_for, stratified};
 use crate::scene::{newell_normal, polygon_centroid, Scene};
 use crate::{luminance, Progress, Rgb};

@@ -339,7 +339,7 @@ mod tests {
                 // Every open cell's centre lies in one piece, every covered one in none.
                 for b in 0..64 {
                     let x = e.point(&positions, ((b % 8) as f64 + 0.5) / 8.0, ((b / 8) as f64 + 0.5) / 8.0);
-                    let inside = pieces.iter().filter(|p| crate::form_factor::geom::inside_convex(x, p, DVec3::Z, 0.0)).count();
+                    let inside = pieces.iter().filter(|p| crate::geom::inside_convex(x, p, DVec3::Z, 0.0)).count();
                     assert_eq!(inside, (mask >> b & 1) as usize, "cell {b} of mask {mask:016x}");
                 }
             }

@@ -30,6 +30,7 @@ use glam::DVec3;
 
 pub use camera::Camera;
 pub use validate::PLANARITY_TOL;
+pub use crate::geom::newell_normal;
 
 use crate::{Error, Location, Result, Rgb, Warning};
 
@@ -385,16 +386,6 @@ pub fn load(spec: &str) -> Result<SceneDesc> {
 /// Reads and validates a scene in one step.
 pub fn load_scene(spec: &str) -> Result<Scene> {
     Scene::from_desc(load(spec)?)
-}
-
-/// Newell's normal (not normalised; length = 2·area for a planar polygon).
-pub fn newell_normal(v: &[DVec3]) -> DVec3 {
-    let mut n = DVec3::ZERO;
-    let c = v[0];
-    for i in 1..v.len().saturating_sub(1) {
-        n += (v[i] - c).cross(v[i + 1] - c);
-    }
-    n
 }
 
 /// Area-weighted centroid of a planar polygon (fan decomposition).

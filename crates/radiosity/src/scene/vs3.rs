@@ -28,7 +28,7 @@ use std::path::Path;
 use glam::{DVec2, DVec3};
 
 use super::{MaterialDesc, ObjectDesc, PolygonDesc, SceneDesc};
-use crate::form_factor::geom::{PieceSet, PlaneFrame};
+use crate::geom::{PieceSet, PlaneFrame};
 use crate::{Error, Location, Result, Rgb, Warning};
 
 /// What a `.vs3` file's `T` and `C` lines ask for.
@@ -235,7 +235,7 @@ fn cut_subsurfaces(base: &Surface, subs: &[&Surface]) -> Result<Vec<Vec<DVec3>>>
             ));
         }
         let mut cut = to2(&s.verts);
-        if crate::form_factor::geom::area2_2d(&cut) < 0.0 {
+        if crate::geom::area2_2d(&cut) < 0.0 {
             cut.reverse();
         }
         set.subtract(&cut, 1e-12 * size, 1e-12 * area, &mut next, &mut tmp);

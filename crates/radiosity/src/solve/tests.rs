@@ -143,7 +143,7 @@ fn open_box() -> &'static Fixture {
                     for a in 0..K {
                         for b in 0..K {
                             let x = ei.point(&mesh.positions, (a as f64 + 0.5) / K as f64, (b as f64 + 0.5) / K as f64);
-                            sum += form_factor::kernel::point_to_polygon(x, ei.normal, &c[..nv], ej.normal);
+                            sum += crate::geom::kernel::point_to_polygon(x, ei.normal, &c[..nv], ej.normal);
                         }
                     }
                     if sum > 0.0 {
