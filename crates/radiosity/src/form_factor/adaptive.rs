@@ -68,10 +68,16 @@ impl<'a> Rows<'a> {
         Rows { ctx, tree: PolyTree::new(&ctx.scene.polygons), twins: &ctx.twins, cache: PairCache::default(), budget: BudgetHits::default() }
     }
 
-    /// `A_i F_ij` of a pair whose integral both rows take alike (see [`PairCache`]), from
-    /// the cache when the other row has computed it, else computed (and kept for the
-    /// other row if it was expensive).
-    fn shared_pair(&self, key: (u32, u32), s: &mut Scratch, compute: impl FnOnce(&mut Scratch) -> f64) -> f64 {
+    /// `A_a F_ab` for row `a` and column `b` (on patches `patches`), computed by
+    /// `compute`. Where both rows take the integral alike (`alike`: neither element
+    /// partly covered; and neither patch with twins), it comes from the cache when the
+    /// other row has computed it, and is kept for the other row if it was expensive (see
+    /// [`PairCache`]).
+    fn shared_pair(&self, a: u32, b: u32, patches: (u32, u32), alike: bool, s: &mut Scratch, compute: impl FnOnce(&mut Scratch) -> f64) -> f64 {
+        if a == b || !alike || !self.twins[patches.0 as usize].is_empty() || !self.twins[patches.1 as usize].is_empty() {
+            return compute(s);
+        }
+        let key = (a.min(b), a.max(b));
         if let Some(af) = self.cache.take(key) {
             return af;
         }
@@ -267,11 +273,7 @@ impl RowSource for Rows<'_> {
                 let oj = open(j as usize);
                 s.cover = (partly(oi).then_some(i as u32), partly(oj).then_some(j));
                 let pair = |s: &mut Scratch| self.pair(ci, ei.normal, ei.patch, &cj[..nj], ej.normal, q, s);
-                let af = if j as usize != i && !partly(oi) && !partly(oj) && self.twins[ei.patch as usize].is_empty() && self.twins[q as usize].is_empty() {
-                    self.shared_pair(((i as u32).min(j), (i as u32).max(j)), s, pair)
-                } else {
-                    pair(s)
-                };
+                let af = self.shared_pair(i as u32, j, (ei.patch, q), !partly(oi) && !partly(oj), s, pair);
                 if af != 0.0 {
                     out.push((j, af / area_i));
                 }
@@ -309,12 +311,7 @@ impl RowSource for PolygonRows<'_> {
         for &q in &patches {
             let pq = &polys[q as usize];
             let pair = |s: &mut Scratch| self.rows.pair(&pp.vertices, pp.normal, p as u32, &pq.vertices, pq.normal, q, s);
-            let twins = self.rows.twins;
-            let af = if q as usize != p && twins[p].is_empty() && twins[q as usize].is_empty() {
-                self.rows.shared_pair(((p as u32).min(q), (p as u32).max(q)), s, pair)
-            } else {
-                pair(s)
-            };
+            let af = self.rows.shared_pair(p as u32, q, (p as u32, q), true, s, pair);
             if af != 0.0 {
                 out.push((q, af / pp.area));
             }
@@ -792,17 +789,12 @@ impl RegionCtx<'_, '_> {
             return;
         }
         Rows::pyramid(x, self.recv, &mut self.eval.sides);
-        let mut keyed: Vec<(f64, u32)> = occ
-            .iter()
-            .map(|&o| {
-                let a = if self.rows.shadow(x, dx, o, self.recv, true, self.eval) { area2_2d(&self.eval.shadow) } else { 0.0 };
-                (a, o)
-            })
-            .collect();
-        keyed.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-        for (slot, (_, o)) in occ.iter_mut().zip(keyed) {
-            *slot = o;
-        }
+        // Shadows are counter-clockwise (area ≥ 0), whose f64 bits order as the areas do;
+        // the sort is stable, so ties keep their order.
+        occ.sort_by_cached_key(|&o| {
+            let a = if self.rows.shadow(x, dx, o, self.recv, true, self.eval) { area2_2d(&self.eval.shadow) } else { 0.0 };
+            std::cmp::Reverse(a.to_bits())
+        });
     }
 }
 
