@@ -22,7 +22,8 @@ pub struct SolveFlags {
     /// Target element size in scene units [default: scene diagonal / 36].
     #[arg(long, value_name = "S")]
     pub mesh_size: Option<f64>,
-    /// Most elements: a uniform mesh above this is refused [default: 200000]; with
+    /// Most elements: a uniform mesh above this is refused [default: 200000; 8000000 with
+    /// --transport hierarchical]; with
     /// --adaptive, also the limit of refinement [default: twice the uniform mesh's count].
     #[arg(long, value_name = "N")]
     pub max_elements: Option<u64>,
@@ -34,6 +35,22 @@ pub struct SolveFlags {
     pub visibility_samples: usize,
     #[command(flatten)]
     pub ff: FormFactorTuning,
+    /// Transport operator: rows (a row of form factors per element: n² time and memory,
+    /// every solver) or hierarchical (links between clusters, patches and elements:
+    /// n log n; jacobi and the stochastic solvers).
+    #[arg(long, value_name = "KIND", default_value = "rows")]
+    pub transport: String,
+    /// Hierarchical: a link is accepted when (size of receiver + size of source) / distance
+    /// is below this.
+    #[arg(long, value_name = "X", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_SEPARATION)]
+    pub link_separation: f64,
+    /// Hierarchical: partially visible links carrying less than this fraction of the
+    /// scene's power are kept instead of refined (BF refinement).
+    #[arg(long, value_name = "TOL", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_TOLERANCE)]
+    pub link_tolerance: f64,
+    /// Hierarchical: rays per link that classify its visibility (partial links are refined).
+    #[arg(long, value_name = "N", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_VISIBILITY_RAYS)]
+    pub link_rays: usize,
     /// Solver: direct, jacobi, gauss-seidel, shooting, progressive, stochastic-jacobi,
     /// stochastic-shooting, or (solve only) all.
     #[arg(long, value_name = "NAME", default_value = "jacobi")]
@@ -101,6 +118,28 @@ impl SolveFlags {
         if self.rays == Some(0) {
             bail!("--rays must be at least 1");
         }
+        let transport: radiosity::transport::Kind = self.transport.parse()?;
+        let links = form_factor::hierarchical::Options {
+            separation: self.link_separation,
+            tolerance: self.link_tolerance,
+            visibility_rays: self.link_rays,
+        };
+        links.validate()?;
+        let hierarchical = transport == radiosity::transport::Kind::Hierarchical;
+        if hierarchical && method != form_factor::Method::PointSampled {
+            bail!(
+                "--transport hierarchical computes its element-to-element links point-sampled; --form-factors {} applies to --transport rows",
+                method.name()
+            );
+        }
+        if !self.all_solvers() {
+            radiosity::pipeline::check_transport(solver, transport)?;
+        }
+        let default_max = if hierarchical {
+            radiosity::pipeline::DEFAULT_MAX_ELEMENTS_HIERARCHICAL
+        } else {
+            radiosity::pipeline::DEFAULT_MAX_ELEMENTS
+        };
         Ok(Settings {
             mesh_size: self.mesh_size,
             form_factors: self.ff.options(method, self.seed, self.visibility_samples)?,
@@ -113,8 +152,10 @@ impl SolveFlags {
                 rays: self.rays,
                 ..Default::default()
             },
-            max_elements: self.max_elements.unwrap_or(radiosity::pipeline::DEFAULT_MAX_ELEMENTS),
+            max_elements: self.max_elements.unwrap_or(default_max),
             adaptive: self.adaptive.options(self.max_elements)?,
+            transport,
+            links,
         })
     }
 

@@ -17,7 +17,7 @@ use crate::render::{Image, PinholeCamera};
 use crate::report::{ComparisonRow, EnergyReport, ObjectReport, Report, Timings};
 use crate::scene::{Camera, Scene};
 use crate::solve::{self, IterationState, RaySystem, Solution, Solver, System};
-use crate::transport::{SparseRows, Transport};
+use crate::transport::{self, Operator, Transport};
 use crate::{Error, Progress, Result, Rgb};
 
 /// Everything that decides a solution.
@@ -36,6 +36,10 @@ pub struct Settings {
     /// Adaptive refinement of the uniform mesh (None: uniform only); `mesh_size` is then the
     /// size before refinement.
     pub adaptive: Option<mesh::adaptive::Options>,
+    /// How the operator is held: explicit rows, or hierarchical links.
+    pub transport: transport::Kind,
+    /// Link refinement of the hierarchical operator.
+    pub links: form_factor::hierarchical::Options,
 }
 
 impl Default for Settings {
@@ -47,12 +51,18 @@ impl Default for Settings {
             solve: solve::Options::default(),
             max_elements: DEFAULT_MAX_ELEMENTS,
             adaptive: None,
+            transport: transport::Kind::Rows,
+            links: form_factor::hierarchical::Options::default(),
         }
     }
 }
 
-/// Default cap on the element count.
+/// Default cap on the element count (explicit rows: form factors cost grows as n²).
 pub const DEFAULT_MAX_ELEMENTS: u64 = 200_000;
+
+/// Default cap on the element count with the hierarchical operator (cost grows as
+/// n log n; memory is about 1 kB per element, see BENCHMARKS.md).
+pub const DEFAULT_MAX_ELEMENTS_HIERARCHICAL: u64 = 8_000_000;
 
 /// A solved scene.
 pub struct Solved {
@@ -64,8 +74,9 @@ pub struct Solved {
     pub rays: SceneRays,
     /// Receiver points and open (uncovered) fraction of every element.
     pub receivers: Receivers,
-    /// The form-factor rows (None for the stochastic solvers, which never compute them).
-    pub transport: Option<SparseRows>,
+    /// The transport operator: form-factor rows or hierarchical links (None for the
+    /// stochastic solvers, which never compute them).
+    pub transport: Option<Operator>,
     /// Form-factor statistics (None when none were computed).
     pub ff_stats: Option<form_factor::Stats>,
     /// The solution.
@@ -114,7 +125,7 @@ struct Prepared {
     mesh: Mesh,
     rays: SceneRays,
     receivers: Receivers,
-    transport: Option<SparseRows>,
+    transport: Option<Operator>,
     ff_stats: Option<form_factor::Stats>,
     reflectance: Vec<Rgb>,
     emission: Vec<Rgb>,
@@ -237,8 +248,47 @@ impl Prepared {
         let (receivers, transport, ff_stats) = if form_factors {
             let t = Instant::now();
             let receivers = Receivers::compute(scene, mesh, rays);
-            let (transport, mut ff_stats) =
-                form_factor::compute(scene, mesh, rays, &receivers, &settings.form_factors, progress)?;
+            let (transport, mut ff_stats) = match settings.transport {
+                transport::Kind::Rows => {
+                    let (rows, stats) = form_factor::compute(scene, mesh, rays, &receivers, &settings.form_factors, progress)?;
+                    (Operator::Rows(rows), stats)
+                }
+                transport::Kind::Hierarchical => {
+                    let (rho, em) = element_materials(scene, mesh);
+                    let tree = transport::hierarchical::Tree::build(mesh, &receivers.open_areas(mesh));
+                    let (h, rays_cast) = form_factor::hierarchical::link(
+                        mesh,
+                        rays,
+                        &receivers,
+                        tree,
+                        &rho,
+                        &em,
+                        &settings.form_factors,
+                        &settings.links,
+                        progress,
+                    )?;
+                    let mut warnings = Vec::new();
+                    if h.stats.rows_scaled > 0 {
+                        let w = format!(
+                            "hierarchical links: {} element(s) whose links summed above 1 were scaled to 1 (largest raw sum {:.4}); \
+                             this happens near coincident, touching or interpenetrating surfaces",
+                            h.stats.rows_scaled, h.stats.max_row_sum
+                        );
+                        progress.message(&format!("warning: {w}"));
+                        warnings.push(w);
+                    }
+                    let stats = form_factor::Stats {
+                        method: format!("hierarchical ({} leaves)", settings.form_factors.method.name()),
+                        nonzeros: h.stats.links,
+                        rays: rays_cast,
+                        seconds: t.elapsed().as_secs_f64(),
+                        warnings,
+                        guard: Default::default(),
+                        hierarchy: Some(h.stats.clone()),
+                    };
+                    (Operator::Hierarchical(h), stats)
+                }
+            };
             ff_stats.rays += receivers.rays + self.refine_rays;
             self.timings.form_factors += t.elapsed().as_secs_f64();
             (receivers, Some(transport), Some(ff_stats))
@@ -322,6 +372,18 @@ impl Prepared {
     }
 }
 
+/// Refuses, before any work, a deterministic solver that needs explicit rows on the
+/// hierarchical operator (only Jacobi multiplies by F alone).
+pub fn check_transport(solver: Solver, kind: transport::Kind) -> Result<()> {
+    if kind == transport::Kind::Hierarchical && !solver.is_stochastic() && solver != Solver::Jacobi {
+        return Err(Error::Invalid(format!(
+            "the {solver} solver reads rows or columns of F, which the hierarchical operator does not store: \
+             use --solver jacobi (or a stochastic solver) with --transport hierarchical, or --transport rows"
+        )));
+    }
+    Ok(())
+}
+
 /// Meshes, builds the BVH, computes form factors (not for the stochastic solvers) and
 /// solves.
 pub fn solve_scene(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Solved> {
@@ -336,6 +398,7 @@ pub fn solve_scene_observed(
     mut observer: Option<&mut FrameObserver<'_>>,
 ) -> Result<Solved> {
     let stochastic = settings.solver.is_stochastic();
+    check_transport(settings.solver, settings.transport)?;
     let (mut prepared, mut refiner) =
         prepare(scene, settings, !stochastic, settings.solver == Solver::Direct, progress)?;
     let mut pass = 0;

@@ -11,6 +11,7 @@ use radiosity::form_factor::Method;
 use radiosity::pipeline::{solve_all, solve_scene, Settings};
 use radiosity::scene::{MaterialDesc, ObjectDesc, PolygonDesc, Scene, SceneDesc};
 use radiosity::solve::Solver;
+use radiosity::transport::Transport;
 use radiosity::{NoProgress, Rgb};
 
 fn v(x: f64, y: f64, z: f64) -> DVec3 {
@@ -102,7 +103,7 @@ fn survey() {
                 let e = &solved.mesh.elements[w];
                 let p = &solved.scene.polygons[e.patch as usize];
                 println!("   worst el {w} patch {} obj {} back {} c {:?} n {:?} open {:.3} cells {:016x}", e.patch, p.object, p.back_side, e.centroid, e.normal, solved.receivers.open_fraction[w], solved.receivers.open_cells[w]);
-                let f = solved.transport.as_ref().unwrap();
+                let f = solved.transport.as_ref().unwrap().rows().unwrap();
                 let (cols, vals) = f.row(w); let mut row: Vec<(u32, f64)> = cols.iter().copied().zip(vals.iter().map(|x| *x as f64)).collect();
                 row.sort_by(|a, b| b.1.total_cmp(&a.1));
                 for (j, x) in row.iter().take(6) {
@@ -112,7 +113,7 @@ fn survey() {
                 }
             }
             if std::env::var("ONLY_GUARD").is_ok() { continue; }
-            let f = solved.transport.as_ref().unwrap();
+            let f = solved.transport.as_ref().unwrap().rows().unwrap();
             let n = solved.mesh.len();
             let mut worst = (0.0, 0);
             for i in 0..n {

@@ -9,7 +9,7 @@ use radiosity::form_factor::{self, Options};
 use radiosity::mesh::{self, Receivers};
 use radiosity::pipeline::{solve_scene, Settings};
 use radiosity::scene::{builtin, Scene};
-use radiosity::transport::SparseRows;
+use radiosity::transport::{SparseRows, Transport};
 use radiosity::{NoProgress, Rgb};
 
 fn factors(scene: &Scene, size: f64) -> (mesh::Mesh, SparseRows, Vec<f64>) {
@@ -60,7 +60,7 @@ fn furnace_box_radiosity_is_e_over_one_minus_rho() {
     }
     // Closed and unoccluded: every row sums to one.
     for i in 0..solved.mesh.len() {
-        let s = solved.transport.as_ref().unwrap().row_sum(i);
+        let s = solved.transport.as_ref().unwrap().rows().unwrap().row_sum(i);
         assert!((s - 1.0).abs() < 1e-5, "row {i} sums to {s}");
     }
     // Energy balance closes: nothing escapes a closed box.

@@ -34,6 +34,7 @@ pub mod analytic;
 pub mod diagnostics;
 pub mod enclosure;
 pub mod hemicube;
+pub mod hierarchical;
 pub mod monte_carlo;
 mod point_sampled;
 mod twins;
@@ -202,6 +203,9 @@ pub struct Stats {
     pub warnings: Vec<String>,
     /// What the row guard had to correct (see [`RowGuard`]).
     pub guard: RowGuard,
+    /// The hierarchical operator's links and nodes (`--transport hierarchical`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hierarchy: Option<crate::transport::hierarchical::HierarchyStats>,
 }
 
 /// The guard behind every method: each row leaves the method with every `F_ij` finite
@@ -349,6 +353,7 @@ pub fn for_each_row(
         seconds: t0.elapsed().as_secs_f64(),
         warnings,
         guard,
+        hierarchy: None,
     })
 }
 
@@ -394,7 +399,7 @@ pub fn for_each_polygon_row(
         guard.worst_source = scene.polygons.get(p).and_then(|p| p.loc.as_ref()).map(|l| l.to_string());
     }
     guard_warning(&guard, progress, &mut warnings);
-    Ok(Stats { method: opts.method.name().to_string(), nonzeros, rays: nrays, seconds: t0.elapsed().as_secs_f64(), warnings, guard })
+    Ok(Stats { method: opts.method.name().to_string(), nonzeros, rays: nrays, seconds: t0.elapsed().as_secs_f64(), warnings, guard, hierarchy: None })
 }
 
 fn guard_warning(guard: &RowGuard, progress: &dyn Progress, warnings: &mut Vec<String>) {

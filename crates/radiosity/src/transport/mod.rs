@@ -9,9 +9,11 @@
 //! `n × n` matrix.
 
 mod dense;
+pub mod hierarchical;
 mod sparse;
 
 pub use dense::{available_memory, DenseMatrix};
+pub use hierarchical::Hierarchy;
 pub use sparse::SparseRows;
 
 use crate::Rgb;
@@ -32,4 +34,97 @@ pub trait Transport: Sync {
     }
     /// Bytes of memory held.
     fn memory_bytes(&self) -> usize;
+}
+
+/// How the operator is represented: a runtime choice (`--transport`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Kind {
+    /// One row of form factors per element ([`SparseRows`]): O(n²) time and memory, every
+    /// solver.
+    #[default]
+    Rows,
+    /// Links between nodes of an element tree with clusters ([`Hierarchy`]): O(n log n);
+    /// the solvers that only multiply by F (Jacobi) and the stochastic ones.
+    Hierarchical,
+}
+
+impl Kind {
+    /// Every kind.
+    pub const ALL: [Kind; 2] = [Kind::Rows, Kind::Hierarchical];
+    /// The command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Rows => "rows",
+            Kind::Hierarchical => "hierarchical",
+        }
+    }
+}
+
+impl std::fmt::Display for Kind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Kind {
+    type Err = crate::Error;
+    fn from_str(s: &str) -> crate::Result<Self> {
+        Kind::ALL.iter().copied().find(|k| k.name() == s).ok_or_else(|| {
+            crate::Error::Invalid(format!("unknown transport '{s}' (known: rows, hierarchical)"))
+        })
+    }
+}
+
+/// The operator a solve runs on: explicit rows or hierarchical links.
+#[derive(Clone, Debug)]
+pub enum Operator {
+    /// Form-factor rows.
+    Rows(SparseRows),
+    /// Hierarchical links.
+    Hierarchical(Hierarchy),
+}
+
+impl Operator {
+    /// The hierarchy, when the operator is one.
+    pub fn hierarchy(&self) -> Option<&Hierarchy> {
+        match self {
+            Operator::Hierarchical(h) => Some(h),
+            Operator::Rows(_) => None,
+        }
+    }
+    /// `Σ_j F_ij` of every element.
+    pub fn row_sums(&self) -> Vec<f64> {
+        match self {
+            Operator::Rows(r) => (0..r.n()).map(|i| r.row_sum(i)).collect(),
+            Operator::Hierarchical(h) => h.row_sums(),
+        }
+    }
+}
+
+impl Transport for Operator {
+    fn len(&self) -> usize {
+        match self {
+            Operator::Rows(r) => r.len(),
+            Operator::Hierarchical(h) => h.len(),
+        }
+    }
+    fn gather(&self, x: &[Rgb], y: &mut [Rgb]) {
+        match self {
+            Operator::Rows(r) => r.gather(x, y),
+            Operator::Hierarchical(h) => h.gather(x, y),
+        }
+    }
+    fn rows(&self) -> Option<&SparseRows> {
+        match self {
+            Operator::Rows(r) => Some(r),
+            Operator::Hierarchical(_) => None,
+        }
+    }
+    fn memory_bytes(&self) -> usize {
+        match self {
+            Operator::Rows(r) => r.memory_bytes(),
+            Operator::Hierarchical(h) => h.memory_bytes(),
+        }
+    }
 }

@@ -1,0 +1,590 @@
+//! Hierarchical transport: links between nodes of a tree over the elements, applied by
+//! pull – gather – push (Hanrahan, Salzman & Aupperle 1991; clustering after Smits, Arvo &
+//! Greenberg 1994 and Sillion 1995).
+//!
+//! The tree ([`Tree`]) is built over the mesh's elements: *surface* nodes hold elements of
+//! one plane (facing one way), *cluster* nodes anything else. A link `(R, S, f)` says that
+//! every point of the receiver node `R` gathers `f · B̄_S`, with `B̄_S` the area-weighted
+//! mean radiosity of the source node `S` and `f` the form factor from `R` to `S`
+//! (averaged over `R`). One product `y = F·x` is
+//!
+//! ```text
+//! pull:   B̄_S = Σ_{j ∈ S} A_j x_j / Σ_{j ∈ S} A_j          (bottom-up)
+//! gather: G_R = Σ_{(R,S,f)} f · B̄_S                        (per receiver node)
+//! push:   y_i = s_i · Σ_{R ∋ i} G_R                         (top-down, every ancestor)
+//! ```
+//!
+//! so it costs O(nodes + links), not O(n²). Pushing irradiance (a value per unit area) down
+//! and pulling area-weighted means up conserves power exactly: the power a link carries,
+//! `f · B̄_S · A_R`, is what the receiver's leaves receive (`Σ_{i∈R} A_i · f · B̄_S`). `s_i ≤ 1` is
+//! the row guard: leaves whose links sum above one are scaled to one (as
+//! [`crate::form_factor::RowGuard`] does for explicit rows), so `‖ρF‖∞ < 1` holds here too.
+//! The links are computed by [`crate::form_factor::hierarchical`].
+
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+use super::Transport;
+use crate::mesh::Mesh;
+use crate::Rgb;
+
+/// Marks "no child".
+pub const NONE: u32 = u32::MAX;
+
+/// One node of the element tree.
+#[derive(Clone, Copy, Debug)]
+pub struct Node {
+    /// Bounding box of its elements (f32, enlarged by rounding outwards).
+    pub lo: Vec3,
+    /// Upper corner.
+    pub hi: Vec3,
+    /// Children (both [`NONE`] for a leaf, which holds one element).
+    pub child: [u32; 2],
+    /// Its elements are `order[first .. first + count]` ([`Tree::order`]).
+    pub first: u32,
+    /// Number of elements.
+    pub count: u32,
+    /// Open (uncovered) area.
+    pub area: f32,
+    /// Area-weighted centroid.
+    pub centroid: Vec3,
+    /// `Σ A_j n_j` over its elements (for a surface node: area × normal).
+    pub n_sum: Vec3,
+    /// `Σ A_j n_j n_jᵀ` (xx, yy, zz, xy, xz, yz): with `n_sum`, the projected area seen from
+    /// any direction (see [`Node::projected_area`]).
+    pub n_moment: [f32; 6],
+    /// True when all its elements lie in one plane and face one way.
+    pub surface: bool,
+    /// Depth below the root (0).
+    pub depth: u16,
+}
+
+impl Node {
+    /// True for a leaf (one element).
+    #[inline]
+    pub fn is_leaf(&self) -> bool {
+        self.child[0] == NONE
+    }
+
+    /// Length of the bounding-box diagonal.
+    #[inline]
+    pub fn size(&self) -> f64 {
+        (self.hi - self.lo).length() as f64
+    }
+
+    /// Unit normal of a surface node (area-weighted mean of its elements' normals).
+    #[inline]
+    pub fn normal(&self) -> DVec3 {
+        self.n_sum.as_dvec3().normalize_or_zero()
+    }
+
+    /// Projected area of the node's front faces towards the unit direction `d`,
+    /// `Σ_j A_j max(0, n_j·d)`, estimated from the node's first two normal moments:
+    /// `½ Σ A|n·d| + ½ Σ A n·d` with `Σ A|n·d| ≤ √(A · dᵀMd)` (Cauchy–Schwarz). Exact for a
+    /// surface node (every `n_j` equal); for a cluster an orientation-aware estimate that is
+    /// zero for a plane facing away and `A/4`-like for a closed, rounded object.
+    #[inline]
+    pub fn projected_area(&self, d: DVec3) -> f64 {
+        let m = &self.n_moment;
+        let (x, y, z) = (d.x, d.y, d.z);
+        let q = m[0] as f64 * x * x
+            + m[1] as f64 * y * y
+            + m[2] as f64 * z * z
+            + 2.0 * (m[3] as f64 * x * y + m[4] as f64 * x * z + m[5] as f64 * y * z);
+        let abs = (self.area as f64 * q.max(0.0)).sqrt();
+        (0.5 * abs + 0.5 * self.n_sum.as_dvec3().dot(d)).max(0.0)
+    }
+}
+
+/// A binary tree over the elements: surface nodes below cluster nodes.
+#[derive(Clone, Debug, Default)]
+pub struct Tree {
+    /// Nodes; the root is 0 and every child comes after its parent.
+    pub nodes: Vec<Node>,
+    /// Elements in tree order: node `k` holds `order[first .. first + count]`.
+    pub order: Vec<u32>,
+    /// The leaf node of every element.
+    pub leaf_of: Vec<u32>,
+    /// Prefix sums of the open areas in tree order (`order.len() + 1` entries), for
+    /// area-uniform sampling of a node.
+    pub area_prefix: Vec<f64>,
+}
+
+/// Elements of one plane share a key: normal and offset quantised.
+fn plane_key(n: DVec3, c: DVec3, quantum: f64) -> (i32, i32, i32, i64) {
+    let q = |v: f64| (v * 2048.0).round() as i32;
+    (q(n.x), q(n.y), q(n.z), (n.dot(c) / quantum).round() as i64)
+}
+
+impl Tree {
+    /// Builds the tree over `mesh`'s elements with the open `area` of each: at each node,
+    /// a plane (same quantised normal and offset) that holds at least half of the node's
+    /// area is split off as its own child (so a floor under furniture stays one surface
+    /// node), else the elements are split at the median of the longest axis of their
+    /// centroids.
+    pub fn build(mesh: &Mesh, area: &[f64]) -> Tree {
+        let n = mesh.len();
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        if n == 0 {
+            return Tree::default();
+        }
+        let (lo, hi) = mesh.positions.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), p| (l.min(*p), h.max(*p)));
+        let quantum = ((hi - lo).length() * 1e-6).max(f64::MIN_POSITIVE);
+        // Plane ids per element.
+        let mut ids = std::collections::HashMap::new();
+        let plane: Vec<u32> = mesh
+            .elements
+            .iter()
+            .map(|e| {
+                let k = plane_key(e.normal, e.centroid, quantum);
+                let next = ids.len() as u32;
+                *ids.entry(k).or_insert(next)
+            })
+            .collect();
+        let mut nodes: Vec<Node> = Vec::with_capacity(2 * n);
+        let blank = Node {
+            lo: Vec3::ZERO,
+            hi: Vec3::ZERO,
+            child: [NONE; 2],
+            first: 0,
+            count: n as u32,
+            area: 0.0,
+            centroid: Vec3::ZERO,
+            n_sum: Vec3::ZERO,
+            n_moment: [0.0; 6],
+            surface: false,
+            depth: 0,
+        };
+        nodes.push(blank);
+        let mut stack = vec![0u32];
+        let mut plane_area: std::collections::HashMap<u32, f64> = std::collections::HashMap::new();
+        while let Some(k) = stack.pop() {
+            let (first, count, depth) = {
+                let nd = &nodes[k as usize];
+                (nd.first as usize, nd.count as usize, nd.depth)
+            };
+            let slice = &mut order[first..first + count];
+            let p0 = plane[slice[0] as usize];
+            let one_plane = slice.iter().all(|&e| plane[e as usize] == p0);
+            nodes[k as usize].surface = one_plane;
+            if count == 1 {
+                continue;
+            }
+            let mut mid = 0;
+            if !one_plane {
+                // The plane with the most area, split off when it holds half the node's.
+                plane_area.clear();
+                let mut total = 0.0;
+                for &e in slice.iter() {
+                    let a = mesh.elements[e as usize].area;
+                    total += a;
+                    *plane_area.entry(plane[e as usize]).or_insert(0.0) += a;
+                }
+                let (&best, &a) = plane_area.iter().max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(a.0))).expect("non-empty");
+                if a >= 0.5 * total {
+                    slice.sort_by_key(|&e| plane[e as usize] != best);
+                    mid = slice.iter().position(|&e| plane[e as usize] != best).unwrap_or(count);
+                }
+            }
+            if mid == 0 || mid == count {
+                let (cl, ch) = slice.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), &e| {
+                    let c = mesh.elements[e as usize].centroid;
+                    (l.min(c), h.max(c))
+                });
+                let ext = ch - cl;
+                let axis = if ext.x >= ext.y && ext.x >= ext.z { 0 } else if ext.y >= ext.z { 1 } else { 2 };
+                mid = count / 2;
+                slice.select_nth_unstable_by(mid, |&a, &b| {
+                    let (ca, cb) = (mesh.elements[a as usize].centroid[axis], mesh.elements[b as usize].centroid[axis]);
+                    ca.total_cmp(&cb).then(a.cmp(&b))
+                });
+            }
+            let c0 = nodes.len() as u32;
+            for (f, c) in [(first, mid), (first + mid, count - mid)] {
+                nodes.push(Node { first: f as u32, count: c as u32, depth: depth.saturating_add(1), ..blank });
+            }
+            nodes[k as usize].child = [c0, c0 + 1];
+            stack.push(c0 + 1);
+            stack.push(c0);
+        }
+        let mut leaf_of = vec![NONE; n];
+        // Bottom-up: children come after parents.
+        for k in (0..nodes.len()).rev() {
+            let nd = nodes[k];
+            if nd.is_leaf() {
+                let ei = order[nd.first as usize] as usize;
+                leaf_of[ei] = k as u32;
+                let e = &mesh.elements[ei];
+                let (c, nv) = e.corners(&mesh.positions);
+                let (l, h) = c[..nv].iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), p| (l.min(*p), h.max(*p)));
+                let a = area[ei];
+                let nn = e.normal;
+                let node = &mut nodes[k];
+                node.lo = outward(l, false);
+                node.hi = outward(h, true);
+                node.area = a as f32;
+                node.centroid = e.centroid.as_vec3();
+                node.n_sum = (nn * a).as_vec3();
+                node.n_moment = [nn.x * nn.x, nn.y * nn.y, nn.z * nn.z, nn.x * nn.y, nn.x * nn.z, nn.y * nn.z].map(|v| (v * a) as f32);
+            } else {
+                let (a, b) = (nodes[nd.child[0] as usize], nodes[nd.child[1] as usize]);
+                let area = a.area + b.area;
+                let node = &mut nodes[k];
+                node.lo = a.lo.min(b.lo);
+                node.hi = a.hi.max(b.hi);
+                node.area = area;
+                node.centroid = if area > 0.0 {
+                    (a.centroid * a.area + b.centroid * b.area) / area
+                } else {
+                    0.5 * (a.centroid + b.centroid)
+                };
+                node.n_sum = a.n_sum + b.n_sum;
+                for t in 0..6 {
+                    node.n_moment[t] = a.n_moment[t] + b.n_moment[t];
+                }
+            }
+        }
+        let mut area_prefix = Vec::with_capacity(n + 1);
+        area_prefix.push(0.0);
+        let mut acc = 0.0;
+        for &e in &order {
+            acc += area[e as usize];
+            area_prefix.push(acc);
+        }
+        Tree { nodes, order, leaf_of, area_prefix }
+    }
+
+    /// True when node `a` holds every element of node `b` (`b` is `a` or below it).
+    #[inline]
+    pub fn contains(&self, a: u32, b: u32) -> bool {
+        let (na, nb) = (&self.nodes[a as usize], &self.nodes[b as usize]);
+        na.first <= nb.first && nb.first + nb.count <= na.first + na.count
+    }
+
+    /// The element at area fraction `u ∈ [0, 1)` of node `k` (area-uniform choice).
+    #[inline]
+    pub fn element_at(&self, k: u32, u: f64) -> u32 {
+        let nd = &self.nodes[k as usize];
+        let (a, b) = (nd.first as usize, (nd.first + nd.count) as usize);
+        let target = self.area_prefix[a] + u * (self.area_prefix[b] - self.area_prefix[a]);
+        let slot = self.area_prefix[a + 1..=b].partition_point(|&p| p <= target);
+        self.order[(a + slot).min(b - 1)]
+    }
+
+    /// Up to `k` nodes that cover node `node` (descending into the largest first): a
+    /// summary of its shape for the far field.
+    pub fn frontier(&self, node: u32, k: usize, out: &mut Vec<u32>) {
+        out.clear();
+        out.push(node);
+        while out.len() < k {
+            let Some((pos, _)) = out
+                .iter()
+                .enumerate()
+                .filter(|(_, &m)| !self.nodes[m as usize].is_leaf())
+                .max_by(|a, b| self.nodes[*a.1 as usize].area.total_cmp(&self.nodes[*b.1 as usize].area))
+            else {
+                break;
+            };
+            let c = self.nodes[out[pos] as usize].child;
+            out[pos] = c[0];
+            out.push(c[1]);
+        }
+    }
+}
+
+/// Rounds an f64 box corner to f32 outwards.
+fn outward(v: DVec3, up: bool) -> Vec3 {
+    let f = |x: f64| {
+        let y = x as f32;
+        if up && (y as f64) < x {
+            y.next_up()
+        } else if !up && (y as f64) > x {
+            y.next_down()
+        } else {
+            y
+        }
+    };
+    Vec3::new(f(v.x), f(v.y), f(v.z))
+}
+
+/// What the hierarchy holds, for the report.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct HierarchyStats {
+    /// Nodes of the tree.
+    pub nodes: u64,
+    /// Surface nodes (one plane) among them.
+    pub surface_nodes: u64,
+    /// Links.
+    pub links: u64,
+    /// Links whose source is a cluster (several planes).
+    pub cluster_links: u64,
+    /// Links between two leaves (single elements).
+    pub leaf_links: u64,
+    /// Links received per tree depth (index = depth).
+    pub links_per_depth: Vec<u64>,
+    /// Node pairs the refinement examined.
+    pub pairs_examined: u64,
+    /// Node pairs subdivided because their visibility was partial.
+    pub partial_refined: u64,
+    /// Leaves whose links summed above one and were scaled to one.
+    pub rows_scaled: u64,
+    /// The largest raw leaf row sum.
+    pub max_row_sum: f64,
+    /// Bytes held by the tree and the links.
+    pub memory_bytes: u64,
+}
+
+/// One link: receiver node `r` gathers `f · B̄_s`, plus `g · (x − c_r)` at a point `x` of
+/// it (`c_r` its centroid): the factor's first-order change across a large receiver.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Link {
+    /// Receiver node.
+    pub r: u32,
+    /// Source node.
+    pub s: u32,
+    /// Form factor from the receiver to the source, averaged over the receiver.
+    pub f: f32,
+    /// Its gradient across the receiver (per scene unit).
+    pub g: [f32; 3],
+    /// How the source's radiosity is read: `α · B̄_s + β · N_B(s)` with `N_B = Σ A_j B_j n_j`
+    /// ([`Link::directional`] for a cluster seen from one direction; `[1, 0, 0, 0]`, the
+    /// plain mean, for a surface node).
+    pub dir: [f32; 4],
+}
+
+impl Link {
+    /// The plain area-weighted mean of the source.
+    pub const MEAN: [f32; 4] = [1.0, 0.0, 0.0, 0.0];
+
+    /// The mean radiosity of cluster `s`'s front faces as seen from the unit direction `d`
+    /// (from the cluster towards the receiver), weighted by their projected area:
+    /// `Σ A_j max(0, n_j·d) B_j / Σ A_j max(0, n_j·d)` with `max(0, c) = ½|c| + ½c`, the
+    /// `|c|` part taken at the mean radiosity and the `c` part exact through `N_B`. A desk
+    /// seen from the ceiling then gives its lit top's radiosity, not the mean of top and
+    /// dark underside (the classroom ceiling was 27 % dark without it).
+    pub fn directional(s: &Node, d: DVec3) -> [f32; 4] {
+        let p = s.projected_area(d);
+        if !(p > 0.0) {
+            return Link::MEAN;
+        }
+        let half_abs = p - 0.5 * s.n_sum.as_dvec3().dot(d);
+        let b = 0.5 * d / p;
+        [(half_abs / p) as f32, b.x as f32, b.y as f32, b.z as f32]
+    }
+}
+
+/// The hierarchical operator: the tree, links stored by receiver node, and the row guard.
+#[derive(Clone, Debug, Default)]
+pub struct Hierarchy {
+    /// The element tree.
+    pub tree: Tree,
+    /// Links of receiver node `k`: `link_start[k] .. link_start[k+1]`.
+    link_start: Vec<u32>,
+    link_src: Vec<u32>,
+    link_f: Vec<f32>,
+    link_g: Vec<[f32; 3]>,
+    link_dir: Vec<[f32; 4]>,
+    /// Per element: scale applied to what it gathers (1 unless its links summed above 1).
+    scale: Vec<f32>,
+    /// What it holds.
+    pub stats: HierarchyStats,
+}
+
+impl Hierarchy {
+    /// Assembles the operator from the tree and links (any order), measures every leaf's
+    /// row sum over its own and its ancestors' links and scales rows above one to one.
+    pub fn new(tree: Tree, mut links: Vec<Link>, mut stats: HierarchyStats) -> Hierarchy {
+        links.par_sort_unstable_by_key(|l| (l.r, l.s));
+        let m = tree.nodes.len();
+        let mut link_start = vec![0u32; m + 1];
+        for l in &links {
+            link_start[l.r as usize + 1] += 1;
+        }
+        for k in 0..m {
+            link_start[k + 1] += link_start[k];
+        }
+        let link_src = links.iter().map(|l| l.s).collect();
+        let link_f = links.iter().map(|l| l.f).collect();
+        let link_g = links.iter().map(|l| l.g).collect();
+        let link_dir = links.iter().map(|l| l.dir).collect();
+        stats.links = links.len() as u64;
+        stats.nodes = m as u64;
+        stats.surface_nodes = tree.nodes.iter().filter(|n| n.surface).count() as u64;
+        stats.cluster_links = links.iter().filter(|l| !tree.nodes[l.s as usize].surface).count() as u64;
+        stats.leaf_links =
+            links.iter().filter(|l| tree.nodes[l.r as usize].is_leaf() && tree.nodes[l.s as usize].is_leaf()).count() as u64;
+        let depth = tree.nodes.iter().map(|n| n.depth as usize).max().unwrap_or(0);
+        stats.links_per_depth = vec![0; depth + 1];
+        for l in &links {
+            stats.links_per_depth[tree.nodes[l.r as usize].depth as usize] += 1;
+        }
+        let n = tree.order.len();
+        let mut h = Hierarchy { tree, link_start, link_src, link_f, link_g, link_dir, scale: vec![1.0; n], stats };
+        // Row sums: the product with x = 1 (every node's mean is 1).
+        let sums = h.row_sums();
+        let mut scaled = 0;
+        let mut max_sum = 0.0f64;
+        for (i, &s) in sums.iter().enumerate() {
+            if s > 1.0 {
+                h.scale[i] = (1.0 / s) as f32;
+            }
+            // Covered elements (no open area) gather but count for nothing.
+            if h.tree.nodes[h.tree.leaf_of[i] as usize].area > 0.0 {
+                max_sum = max_sum.max(s);
+                if s > 1.0 + 1e-3 {
+                    scaled += 1;
+                }
+            }
+        }
+        h.stats.rows_scaled = scaled;
+        h.stats.max_row_sum = max_sum;
+        h.stats.memory_bytes = h.memory_bytes() as u64;
+        h
+    }
+
+    /// Every element's raw row sum `Σ_j F_ij` (before the guard's scaling).
+    pub fn row_sums(&self) -> Vec<f64> {
+        let ones = vec![Rgb::ONE; self.len()];
+        let mut y = vec![Rgb::ZERO; self.len()];
+        self.apply(&ones, &mut y, false);
+        y.iter().map(|v| v.x).collect()
+    }
+
+    /// Pull – gather – push (see the module docs); `guard` applies the row scaling.
+    fn apply(&self, x: &[Rgb], y: &mut [Rgb], guard: bool) {
+        let nodes = &self.tree.nodes;
+        let m = nodes.len();
+        // Pull: area-weighted means and N_B = Σ A B n (per channel), bottom-up.
+        let mut mean = vec![Rgb::ZERO; m];
+        let mut nb = vec![[DVec3::ZERO; 3]; m];
+        for k in (0..m).rev() {
+            let nd = &nodes[k];
+            mean[k] = if nd.is_leaf() {
+                let v = x[self.tree.order[nd.first as usize] as usize];
+                let n = nd.n_sum.as_dvec3();
+                nb[k] = [n * v.x, n * v.y, n * v.z];
+                v
+            } else {
+                let (c0, c1) = (nd.child[0] as usize, nd.child[1] as usize);
+                nb[k] = [nb[c0][0] + nb[c1][0], nb[c0][1] + nb[c1][1], nb[c0][2] + nb[c1][2]];
+                let (a, b) = (&nodes[nd.child[0] as usize], &nodes[nd.child[1] as usize]);
+                let area = a.area as f64 + b.area as f64;
+                if area > 0.0 {
+                    (mean[nd.child[0] as usize] * a.area as f64 + mean[nd.child[1] as usize] * b.area as f64) / area
+                } else {
+                    Rgb::ZERO
+                }
+            };
+        }
+        // Gather per receiver node: irradiance at its centroid and its gradient (one
+        // spatial vector per colour channel).
+        let mut g: Vec<(Rgb, [DVec3; 3])> = vec![(Rgb::ZERO, [DVec3::ZERO; 3]); m];
+        g.par_iter_mut().enumerate().with_min_len(256).for_each(|(k, gk)| {
+            let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
+            let mut acc = Rgb::ZERO;
+            let mut grad = [DVec3::ZERO; 3];
+            for t in a..b {
+                let s = self.link_src[t] as usize;
+                let dir = self.link_dir[t];
+                let src = if dir == Link::MEAN {
+                    mean[s]
+                } else {
+                    let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
+                    let n = &nb[s];
+                    (mean[s] * dir[0] as f64 + Rgb::new(beta.dot(n[0]), beta.dot(n[1]), beta.dot(n[2]))).max(Rgb::ZERO)
+                };
+                acc += src * self.link_f[t] as f64;
+                let gl = self.link_g[t];
+                if gl != [0.0; 3] {
+                    let gv = Vec3::from_array(gl).as_dvec3();
+                    for (c, gc) in grad.iter_mut().enumerate() {
+                        *gc += gv * src[c];
+                    }
+                }
+            }
+            *gk = (acc, grad);
+        });
+        // Push: every ancestor's irradiance, evaluated at the child's centroid, top-down.
+        for k in 0..m {
+            let nd = &nodes[k];
+            let (v, grad) = g[k];
+            if nd.child[0] != NONE {
+                for c in nd.child {
+                    let d = (nodes[c as usize].centroid - nd.centroid).as_dvec3();
+                    let gc = &mut g[c as usize];
+                    gc.0 += v + Rgb::new(grad[0].dot(d), grad[1].dot(d), grad[2].dot(d));
+                    for t in 0..3 {
+                        gc.1[t] += grad[t];
+                    }
+                }
+            } else {
+                let e = self.tree.order[nd.first as usize] as usize;
+                let s = if guard { self.scale[e] as f64 } else { 1.0 };
+                y[e] = v.max(Rgb::ZERO) * s;
+            }
+        }
+    }
+
+    /// The power the links carry for radiosity `x`, `Σ_links A_R · f · B̃_S` (luminance of
+    /// RGB), summed link by link without the push: what the leaves must receive in all
+    /// (the push–pull conservation check; equal to `Σ_i A_i (F·x)_i` while no row is scaled).
+    pub fn link_power(&self, x: &[Rgb]) -> f64 {
+        let nodes = &self.tree.nodes;
+        let mut total = 0.0;
+        for k in 0..nodes.len() {
+            let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
+            for t in a..b {
+                let s = &nodes[self.link_src[t] as usize];
+                // The source's value from its leaves directly (no pull).
+                let (mut sum, mut nb) = (Rgb::ZERO, [DVec3::ZERO; 3]);
+                for slot in s.first..s.first + s.count {
+                    let e = self.tree.order[slot as usize] as usize;
+                    let leaf = &nodes[self.tree.leaf_of[e] as usize];
+                    let v = x[e];
+                    sum += v * leaf.area as f64;
+                    let n = leaf.n_sum.as_dvec3();
+                    nb = [nb[0] + n * v.x, nb[1] + n * v.y, nb[2] + n * v.z];
+                }
+                let mean = if s.area > 0.0 { sum / s.area as f64 } else { Rgb::ZERO };
+                let dir = self.link_dir[t];
+                let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
+                let src = if dir == Link::MEAN {
+                    mean
+                } else {
+                    (mean * dir[0] as f64 + Rgb::new(beta.dot(nb[0]), beta.dot(nb[1]), beta.dot(nb[2]))).max(Rgb::ZERO)
+                };
+                total += nodes[k].area as f64 * self.link_f[t] as f64 * crate::luminance(src);
+            }
+        }
+        total
+    }
+
+    /// Links received by node `k`: (source node, factor).
+    pub fn links(&self, k: u32) -> impl Iterator<Item = (u32, f32)> + '_ {
+        let (a, b) = (self.link_start[k as usize] as usize, self.link_start[k as usize + 1] as usize);
+        self.link_src[a..b].iter().copied().zip(self.link_f[a..b].iter().copied())
+    }
+}
+
+impl Transport for Hierarchy {
+    fn len(&self) -> usize {
+        self.tree.order.len()
+    }
+
+    fn gather(&self, x: &[Rgb], y: &mut [Rgb]) {
+        self.apply(x, y, true);
+    }
+
+    fn memory_bytes(&self) -> usize {
+        let t = &self.tree;
+        t.nodes.len() * std::mem::size_of::<Node>()
+            + (t.order.len() + t.leaf_of.len()) * 4
+            + t.area_prefix.len() * 8
+            + self.link_start.len() * 4
+            + self.link_src.len() * 4
+            + self.link_f.len() * 4
+            + self.link_g.len() * 12
+            + self.link_dir.len() * 16
+            + self.scale.len() * 4
+    }
+}
