@@ -36,9 +36,10 @@ pub struct SolveFlags {
     #[command(flatten)]
     pub ff: FormFactorTuning,
     /// Transport operator: rows (a row of form factors per element: n² time and memory,
-    /// every solver) or hierarchical (links between clusters, patches and elements:
-    /// n log n; jacobi and the stochastic solvers).
-    #[arg(long, value_name = "KIND", default_value = "rows")]
+    /// every solver), hierarchical (links between clusters, patches and elements:
+    /// n log n; jacobi and the stochastic solvers), or auto (hierarchical above 50000
+    /// elements when the solver and form-factor method allow it; said at start).
+    #[arg(long, value_name = "KIND", default_value = "auto")]
     pub transport: String,
     /// Hierarchical: a link is accepted when (size of receiver + size of source) / distance
     /// is below this.
@@ -51,6 +52,15 @@ pub struct SolveFlags {
     /// Hierarchical: rays per link that classify its visibility (partial links are refined).
     #[arg(long, value_name = "N", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_VISIBILITY_RAYS)]
     pub link_rays: usize,
+    /// Hierarchical: only surface nodes (one plane) receive links; by default clusters of
+    /// several planes receive indirect light too, spread to their elements by normal.
+    #[arg(long)]
+    pub no_cluster_receivers: bool,
+    /// Memory the form-factor rows or the hierarchical links may use (e.g. 8G, 512M):
+    /// refused before any work when the prediction is above it [default: the memory
+    /// available].
+    #[arg(long, value_name = "SIZE")]
+    pub memory_limit: Option<String>,
     /// Solver: direct, jacobi, gauss-seidel, shooting, progressive, stochastic-jacobi,
     /// stochastic-shooting, or (solve only) all.
     #[arg(long, value_name = "NAME", default_value = "jacobi")]
@@ -123,6 +133,7 @@ impl SolveFlags {
             separation: self.link_separation,
             tolerance: self.link_tolerance,
             visibility_rays: self.link_rays,
+            cluster_receivers: !self.no_cluster_receivers,
         };
         links.validate()?;
         let hierarchical = transport == radiosity::transport::Kind::Hierarchical;
@@ -135,14 +146,13 @@ impl SolveFlags {
         if !self.all_solvers() {
             radiosity::pipeline::check_transport(solver, transport)?;
         }
-        let default_max = if hierarchical {
-            radiosity::pipeline::DEFAULT_MAX_ELEMENTS_HIERARCHICAL
-        } else {
-            radiosity::pipeline::DEFAULT_MAX_ELEMENTS
-        };
+        let mut form_factors = self.ff.options(method, self.seed, self.visibility_samples)?;
+        if let Some(m) = &self.memory_limit {
+            form_factors.memory_limit = Some(crate::viewfactors::parse_size(m)?);
+        }
         Ok(Settings {
             mesh_size: self.mesh_size,
-            form_factors: self.ff.options(method, self.seed, self.visibility_samples)?,
+            form_factors,
             solver,
             solve: radiosity::solve::Options {
                 tolerance: self.tolerance,
@@ -152,7 +162,8 @@ impl SolveFlags {
                 rays: self.rays,
                 ..Default::default()
             },
-            max_elements: self.max_elements.unwrap_or(default_max),
+            max_elements: self.max_elements.unwrap_or(radiosity::pipeline::DEFAULT_MAX_ELEMENTS),
+            max_elements_hierarchical: self.max_elements.unwrap_or(radiosity::pipeline::DEFAULT_MAX_ELEMENTS_HIERARCHICAL),
             adaptive: self.adaptive.options(self.max_elements)?,
             transport,
             links,

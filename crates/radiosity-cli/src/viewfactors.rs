@@ -275,7 +275,7 @@ fn write_atomic_stream(path: &Path, f: impl FnOnce(BufWriter<File>) -> Result<()
 }
 
 /// `8G`, `512M`, `1.5GiB`, `100000` (bytes).
-fn parse_size(s: &str) -> Result<u64> {
+pub(crate) fn parse_size(s: &str) -> Result<u64> {
     let t = s.trim();
     let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
     let (num, unit) = t.split_at(split);

@@ -36,8 +36,10 @@ pub struct Settings {
     /// Adaptive refinement of the uniform mesh (None: uniform only); `mesh_size` is then the
     /// size before refinement.
     pub adaptive: Option<mesh::adaptive::Options>,
-    /// How the operator is held: explicit rows, or hierarchical links.
+    /// How the operator is held: explicit rows, hierarchical links, or auto.
     pub transport: transport::Kind,
+    /// Element cap when the operator is hierarchical (`max_elements` is the rows' cap).
+    pub max_elements_hierarchical: u64,
     /// Link refinement of the hierarchical operator.
     pub links: form_factor::hierarchical::Options,
 }
@@ -52,6 +54,7 @@ impl Default for Settings {
             max_elements: DEFAULT_MAX_ELEMENTS,
             adaptive: None,
             transport: transport::Kind::Rows,
+            max_elements_hierarchical: DEFAULT_MAX_ELEMENTS_HIERARCHICAL,
             links: form_factor::hierarchical::Options::default(),
         }
     }
@@ -134,6 +137,8 @@ struct Prepared {
     refinement: Vec<mesh::adaptive::PassStats>,
     /// Rays cast by refinement so far (counted into the form-factor statistics).
     refine_rays: u64,
+    /// The operator kind in use ([`resolve_transport`]).
+    kind: transport::Kind,
 }
 
 fn prepare(
@@ -141,14 +146,35 @@ fn prepare(
     settings: &Settings,
     form_factors: bool,
     direct: bool,
+    any_solver: bool,
     progress: &dyn Progress,
 ) -> Result<(Prepared, Option<mesh::adaptive::Refiner>)> {
     let mut timings = Timings::default();
     let t = Instant::now();
     let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
     let count = mesh::count_uniform(&scene, size);
-    if count > settings.max_elements {
-        return Err(Error::Invalid(element_cap_advice(&scene, size, count, settings.max_elements)));
+    let kind = resolve_transport(settings, count, any_solver);
+    if settings.transport == transport::Kind::Auto && kind == transport::Kind::Hierarchical {
+        progress.message(&format!(
+            "transport: {kind} ({count} elements; auto picks hierarchical above {} for jacobi and the stochastic solvers)",
+            transport::AUTO_ELEMENTS
+        ));
+    }
+    let cap = if kind == transport::Kind::Hierarchical { settings.max_elements_hierarchical } else { settings.max_elements };
+    if count > cap {
+        return Err(Error::Invalid(element_cap_advice(&scene, size, count, cap)));
+    }
+    if kind == transport::Kind::Hierarchical {
+        let limit = settings.form_factors.memory_limit.or_else(transport::available_memory);
+        let needed = form_factor::hierarchical::predict_memory(count, settings.links.separation);
+        if let Some(limit) = limit.filter(|&l| needed > l) {
+            return Err(Error::TooLarge {
+                what: format!("the hierarchical links of {count} elements (predicted)"),
+                needed,
+                limit,
+                hint: "use a larger --mesh-size or --link-separation, or raise --memory-limit".into(),
+            });
+        }
     }
     let mut mesh = mesh::mesh_uniform_with(&scene, size, progress)?;
     timings.mesh = t.elapsed().as_secs_f64();
@@ -193,6 +219,7 @@ fn prepare(
         timings,
         refinement,
         refine_rays,
+        kind,
     };
     Ok((prepared.with_factors(settings, form_factors, progress)?, refiner))
 }
@@ -248,8 +275,8 @@ impl Prepared {
         let (receivers, transport, ff_stats) = if form_factors {
             let t = Instant::now();
             let receivers = Receivers::compute(scene, mesh, rays);
-            let (transport, mut ff_stats) = match settings.transport {
-                transport::Kind::Rows => {
+            let (transport, mut ff_stats) = match self.kind {
+                transport::Kind::Rows | transport::Kind::Auto => {
                     let (rows, stats) = form_factor::compute(scene, mesh, rays, &receivers, &settings.form_factors, progress)?;
                     (Operator::Rows(rows), stats)
                 }
@@ -372,6 +399,24 @@ impl Prepared {
     }
 }
 
+/// The operator `settings.transport` means for a mesh of `count` elements: auto picks
+/// hierarchical above [`transport::AUTO_ELEMENTS`] when the solver (not every solver:
+/// `any_solver`) and the form-factor method allow it.
+pub fn resolve_transport(settings: &Settings, count: u64, any_solver: bool) -> transport::Kind {
+    match settings.transport {
+        transport::Kind::Auto => {
+            let solver_ok = !any_solver && check_transport(settings.solver, transport::Kind::Hierarchical).is_ok();
+            let method_ok = settings.form_factors.method == form_factor::Method::PointSampled;
+            if count > transport::AUTO_ELEMENTS && solver_ok && method_ok && settings.adaptive.is_none() {
+                transport::Kind::Hierarchical
+            } else {
+                transport::Kind::Rows
+            }
+        }
+        k => k,
+    }
+}
+
 /// Refuses, before any work, a deterministic solver that needs explicit rows on the
 /// hierarchical operator (only Jacobi multiplies by F alone).
 pub fn check_transport(solver: Solver, kind: transport::Kind) -> Result<()> {
@@ -400,7 +445,7 @@ pub fn solve_scene_observed(
     let stochastic = settings.solver.is_stochastic();
     check_transport(settings.solver, settings.transport)?;
     let (mut prepared, mut refiner) =
-        prepare(scene, settings, !stochastic, settings.solver == Solver::Direct, progress)?;
+        prepare(scene, settings, !stochastic, settings.solver == Solver::Direct, false, progress)?;
     let mut pass = 0;
     let mut seconds = 0.0;
     loop {
@@ -472,7 +517,7 @@ pub struct Comparison {
 /// keeps what it has and the remaining ones are skipped.
 pub fn solve_all(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Comparison> {
     // `direct` refuses for itself here: the other solvers still run.
-    let (prepared, _) = prepare(scene, settings, true, false, progress)?;
+    let (prepared, _) = prepare(scene, settings, true, false, true, progress)?;
     let mut runs = Vec::new();
     let mut seconds = 0.0;
     for solver in Solver::ALL {

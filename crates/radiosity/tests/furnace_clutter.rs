@@ -6,6 +6,7 @@
 
 use glam::DVec3;
 mod common;
+use common::box_faces;
 
 use radiosity::form_factor::Method;
 use radiosity::pipeline::{solve_all, solve_scene, Settings};
@@ -16,30 +17,6 @@ use radiosity::{NoProgress, Rgb};
 
 fn v(x: f64, y: f64, z: f64) -> DVec3 {
     DVec3::new(x, y, z)
-}
-
-/// The six faces of an axis-aligned box, wound outward (or inward for a room).
-fn box_faces(lo: DVec3, hi: DVec3, inward: bool) -> Vec<Vec<DVec3>> {
-    let c = [
-        v(lo.x, lo.y, lo.z),
-        v(hi.x, lo.y, lo.z),
-        v(hi.x, hi.y, lo.z),
-        v(lo.x, hi.y, lo.z),
-        v(lo.x, lo.y, hi.z),
-        v(hi.x, lo.y, hi.z),
-        v(hi.x, hi.y, hi.z),
-        v(lo.x, hi.y, hi.z),
-    ];
-    let q = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [2, 3, 7, 6], [1, 2, 6, 5], [0, 4, 7, 3]];
-    q.iter()
-        .map(|f| {
-            let mut p: Vec<DVec3> = f.iter().map(|&k| c[k]).collect();
-            if inward {
-                p.reverse();
-            }
-            p
-        })
-        .collect()
 }
 
 /// A furnace room (unit cube, inward) with `clutter` (lists of polygons, one object each).

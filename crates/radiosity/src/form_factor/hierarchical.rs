@@ -2,35 +2,45 @@
 //! (Hanrahan, Salzman & Aupperle 1991, "A rapid hierarchical radiosity algorithm"; clusters
 //! after Smits, Arvo & Greenberg 1994 and Sillion 1995).
 //!
-//! Every maximal surface node of the element tree ([`Tree`]) starts linked to the root and
-//! the pair `(R, S)` is refined recursively:
+//! The top nodes of the element tree ([`Tree`]) holding at most 1/256 of the elements
+//! (clusters or surface nodes; only surface nodes without [`Options::cluster_receivers`])
+//! start linked to the root, one parallel task each, and each pair `(R, S)` is refined
+//! recursively:
 //!
 //! - pairs that cannot exchange light are dropped: `S` inside `R`'s plane or behind it, `R`
-//!   behind a surface node `S`, `S` an ancestor of `R` (descend into `S`'s children);
+//!   behind a surface node `S`; a node holding the other is opened;
 //! - the factor `F_RS` is estimated from a few points of `R` (its receiver points or, above
 //!   the leaves, the centroids of a [`Tree::frontier`]) against a frontier of up to eight
-//!   nodes of `S`: exact contour integrals ([`crate::geom::kernel`]) for element nodes,
-//!   `cosθ_R · P_S(−d) / (π r²)` for larger ones, with `P_S` the orientation-aware
-//!   projected area of a cluster ([`crate::transport::hierarchical::Node::projected_area`]);
+//!   nodes of `S`: exact contour integrals ([`crate::geom::kernel`]) for nearby elements,
+//!   `cosθ_R · P_S(−d) / (π r²)` otherwise, with `P_S` the orientation-aware projected area
+//!   of a cluster ([`crate::transport::hierarchical::Node::projected_area`]);
 //! - the link is accepted when the pair is well separated, `(size_R + size_S) / r < θ`
 //!   (`separation`), and its visibility, from `visibility_rays` rays between area-uniform
-//!   points of the two nodes, is not partial — or it is, but the link's power
-//!   `ρ_R · F_RS · A_R · B̂_S` is below `tolerance × Σ A B̂` (BF refinement; `B̂` = emission
-//!   + an ambient estimate): partial links that matter are refined, so shadow boundaries
-//!   get fine links. (Widening θ for low-power links, as BF refinement also allows, was
-//!   measured: up to 2× halved the links on the classroom but biased it 2.5 % dark);
+//!   points of the two nodes (half as many for links below the power tolerance), is not
+//!   partial — or it is, but the link's power `ρ_R · F_RS · A_R · B̂_S` is below
+//!   `tolerance × Σ A B̂` (BF refinement; `B̂` = emission + an ambient estimate): partial
+//!   links that matter are refined, so shadow boundaries get fine links. (Widening θ for
+//!   low-power links, as BF refinement also allows, was measured: up to 2× halved the links
+//!   on the classroom but biased it 2.5 % dark);
 //! - the factor varies across a large receiver: each link carries its gradient (a plane
-//!   fitted through the estimates at the receiver's points), and the push evaluates the
-//!   ancestors' irradiance at each child's centroid (first-order push: row sums in the
-//!   furnace within ±0.5 % instead of ±6 % at θ = 0.5);
-//! - a cluster's radiosity is read as seen from the receiver ([`crate::transport::hierarchical::Link::directional`]);
-//!   clusters that hold emitters are never sources (always opened);
+//!   fitted through the estimates at the receiver's points, limited so that it cannot
+//!   exceed the mean), and the push evaluates the ancestors' irradiance at each child's
+//!   centroid (first-order push: row sums in the furnace within ±0.5 % instead of ±6 % at
+//!   θ = 0.5);
+//! - a cluster's radiosity is read as seen from the receiver
+//!   ([`crate::transport::hierarchical::Link::directional`]); clusters whose elements emit
+//!   unequally (a lamp and its housing) are never sources;
+//! - a cluster receiver takes links from sources that emit nothing, as irradiance per unit
+//!   cosine from one direction, spread to its elements by their normals
+//!   ([`crate::transport::hierarchical::CLAMPED_COS`]); light from emitters always reaches
+//!   surface nodes (exact cosine);
 //! - otherwise the larger node (or the one that is not a leaf) is split.
 //!
 //! Two elements take the point-sampled factor of [`super::point_sampled`]'s kernel: the
 //! contour integral at the receiver's open points (more of them when close) times the
-//! visible fraction of `visibility_samples²` rays. Each starting receiver draws from its own
-//! random stream, so the links do not depend on the thread count.
+//! visible fraction of `visibility_samples²` rays. Each task draws from its own random
+//! stream, so the links do not depend on the thread count. [`predict_memory`] is checked
+//! before any work.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
@@ -54,6 +64,9 @@ pub struct Options {
     pub tolerance: f64,
     /// Rays per link above the leaves that classify its visibility (full, none, partial).
     pub visibility_rays: usize,
+    /// Clusters may receive (links from non-emitting sources to groups of elements in
+    /// several planes, spread to them by their normals); off: only surface nodes receive.
+    pub cluster_receivers: bool,
 }
 
 /// Default [`Options::separation`].
@@ -65,7 +78,12 @@ pub const DEFAULT_VISIBILITY_RAYS: usize = 8;
 
 impl Default for Options {
     fn default() -> Self {
-        Options { separation: DEFAULT_SEPARATION, tolerance: DEFAULT_TOLERANCE, visibility_rays: DEFAULT_VISIBILITY_RAYS }
+        Options {
+            separation: DEFAULT_SEPARATION,
+            tolerance: DEFAULT_TOLERANCE,
+            visibility_rays: DEFAULT_VISIBILITY_RAYS,
+            cluster_receivers: true,
+        }
     }
 }
 
@@ -83,6 +101,21 @@ impl Options {
         }
         Ok(())
     }
+}
+
+/// Links per element assumed by [`predict_memory`]: measured 325 on the classroom
+/// (12 230 elements) and 332 on 3 × 3 classrooms (60 192) at the default separation, with
+/// margin; it grows slowly (as log n) and falls as 1/θ² with a larger separation.
+pub const PREDICTED_LINKS_PER_ELEMENT: f64 = 400.0;
+
+/// Peak memory of the hierarchical operator for `elements` elements at `separation`:
+/// links (36 bytes stored, and one more copy while the refinement tasks hold them), the
+/// tree (two nodes per element) and the solver's per-node buffers. Checked before any
+/// work against the memory limit.
+pub fn predict_memory(elements: u64, separation: f64) -> u64 {
+    let links = PREDICTED_LINKS_PER_ELEMENT * (DEFAULT_SEPARATION / separation).powi(2) * elements as f64;
+    let node = std::mem::size_of::<Node>() as f64 + 400.0; // node + pull/push buffers
+    (links * 2.0 * 36.0 + elements as f64 * 2.0 * node) as u64
 }
 
 /// Source frontier size (far-field summary of a source node).
@@ -105,6 +138,8 @@ struct Ctx<'a> {
     /// housing, is never a source: its radiosity depends on direction more than the
     /// first-order directional reading follows).
     emits: Vec<bool>,
+    /// Per node: some element emits (its links never go to a cluster receiver).
+    emits_any: Vec<bool>,
     /// Power below which a link may be coarse.
     power_eps: f64,
     /// Distance below which a point counts as on a plane.
@@ -180,6 +215,7 @@ pub fn link(
         opts,
         rho,
         b_hat,
+        emits_any: e_range.iter().map(|r| r.1 > 0.0).collect(),
         emits,
         power_eps: opts.tolerance * total_power,
         eps: 1e-7 * (hi - lo).length().max(f64::MIN_POSITIVE),
@@ -191,7 +227,7 @@ pub fn link(
     let mut stack = if nodes.is_empty() { Vec::new() } else { vec![0u32] };
     while let Some(k) = stack.pop() {
         let nd = &nodes[k as usize];
-        if nd.surface && (nd.count <= max_count || nd.is_leaf()) {
+        if (nd.surface || opts.cluster_receivers) && (nd.count <= max_count || nd.is_leaf()) {
             roots.push(k);
         } else {
             stack.extend(nd.child);
@@ -221,14 +257,14 @@ pub fn link(
         return Err(Error::Cancelled);
     }
     let mut stats = HierarchyStats::default();
-    let mut links = Vec::with_capacity(results.iter().map(|r| r.0.len()).sum());
+    let mut parts = Vec::with_capacity(results.len());
     for (l, c) in results {
-        links.extend(l);
+        parts.push(l);
         stats.pairs_examined += c.pairs;
         stats.partial_refined += c.partial;
     }
     drop(ctx);
-    Ok((Hierarchy::new(tree, links, stats), total_rays.load(Ordering::Relaxed)))
+    Ok((Hierarchy::from_parts(tree, parts, stats), total_rays.load(Ordering::Relaxed)))
 }
 
 /// Range of the signed distance of a box's corners from a plane.
@@ -265,6 +301,15 @@ impl Ctx<'_> {
                 continue;
             }
             if self.tree.contains(r, s) {
+                // R holds S: a cluster to open (a surface node cannot see itself).
+                if !nr.surface {
+                    stack.push((nr.child[0], s));
+                    stack.push((nr.child[1], s));
+                }
+                continue;
+            }
+            if !nr.surface {
+                self.refine_cluster_receiver(r, s, &mut stack, links, &mut rng, &mut scratch, c);
                 continue;
             }
             let (pr, n_r) = (nr.centroid.as_dvec3(), nr.normal());
@@ -297,13 +342,14 @@ impl Ctx<'_> {
             let dist = (ns.centroid - nr.centroid).length() as f64;
             let boxes_apart = nr.lo.cmpgt(ns.hi).any() || ns.lo.cmpgt(nr.hi).any();
             let ratio = if boxes_apart && dist > 0.0 { (nr.size() + ns.size()) / dist } else { f64::INFINITY };
-            let (f, g) = if ratio.is_finite() { self.estimate(r, s, ratio, &mut scratch) } else { (0.0, DVec3::ZERO) };
-            let power = f * nr.area as f64 * self.b_hat[s as usize] as f64 * self.rho[r as usize] as f64;
             if ratio < self.opts.separation {
+                // Only candidate links are estimated (pairs that will be split are not).
+                let (f, g) = self.estimate(r, s, ratio, &mut scratch);
+                let power = f * nr.area as f64 * self.b_hat[s as usize] as f64 * self.rho[r as usize] as f64;
                 if f <= 0.0 {
                     continue;
                 }
-                let (v, partial) = self.visibility(r, s, &mut rng, c);
+                let (v, partial) = self.visibility(r, s, power <= self.power_eps, &mut rng, c);
                 if !(partial && power > self.power_eps) {
                     if v > 0.0 {
                         let dir = if ns.surface {
@@ -326,6 +372,72 @@ impl Ctx<'_> {
                 stack.push((nr.child[0], s));
                 stack.push((nr.child[1], s));
             }
+        }
+    }
+
+    /// One pair whose receiver `r` is a cluster: linked (irradiance per unit cosine from the
+    /// direction of `s`, see [`crate::transport::hierarchical::CLAMPED_COS`]) when well
+    /// separated, `s` emits nothing and visibility allows; else split.
+    #[allow(clippy::too_many_arguments)]
+    fn refine_cluster_receiver(
+        &self,
+        r: u32,
+        s: u32,
+        stack: &mut Vec<(u32, u32)>,
+        links: &mut Vec<Link>,
+        rng: &mut Rng,
+        sc: &mut Scratch,
+        c: &mut Counts,
+    ) {
+        let (nr, ns) = (self.node(r), self.node(s));
+        let tol = self.eps + 1e-6 * nr.size().max(ns.size());
+        if ns.surface {
+            let (_, b) = box_plane_range(nr, ns.centroid.as_dvec3(), ns.normal());
+            if b <= tol {
+                return; // R behind S
+            }
+        }
+        let dist = (ns.centroid - nr.centroid).length() as f64;
+        let boxes_apart = nr.lo.cmpgt(ns.hi).any() || ns.lo.cmpgt(nr.hi).any();
+        let ratio = if boxes_apart && dist > 0.0 { (nr.size() + ns.size()) / dist } else { f64::INFINITY };
+        if ratio < self.opts.separation && !self.emits_any[s as usize] {
+            let x = nr.centroid.as_dvec3();
+            self.tree.frontier(s, SOURCE_FRONTIER, &mut sc.frontier);
+            let mut k = 0.0;
+            let mut dir = DVec3::ZERO;
+            for &q in &sc.frontier {
+                let nq = self.node(q);
+                let d = nq.centroid.as_dvec3() - x;
+                let r2 = d.length_squared();
+                if nq.area <= 0.0 || r2 <= 0.0 {
+                    continue;
+                }
+                let du = d / r2.sqrt();
+                let kq = nq.projected_area(-du) / (std::f64::consts::PI * r2);
+                k += kq;
+                dir += du * kq;
+            }
+            let d = dir.normalize_or_zero();
+            if !(k > 0.0) || d == DVec3::ZERO {
+                return;
+            }
+            let power = k * nr.projected_area(d) * self.b_hat[s as usize] as f64 * self.rho[r as usize] as f64;
+            let (v, partial) = self.visibility(r, s, power <= self.power_eps, rng, c);
+            if !(partial && power > self.power_eps) {
+                if v > 0.0 {
+                    let read = if ns.surface { Link::MEAN } else { Link::directional(ns, -d) };
+                    links.push(Link { r, s, f: (k * v).min(1.0) as f32, g: d.as_vec3().to_array(), dir: read });
+                }
+                return;
+            }
+            c.partial += 1;
+        }
+        if !ns.is_leaf() && ns.size() > nr.size() {
+            stack.push((r, ns.child[0]));
+            stack.push((r, ns.child[1]));
+        } else {
+            stack.push((nr.child[0], s));
+            stack.push((nr.child[1], s));
         }
     }
 
@@ -384,15 +496,23 @@ impl Ctx<'_> {
             f += w * fx;
             sc.values.push(fx);
         }
-        let grad = if nr.is_leaf() { DVec3::ZERO } else { plane_gradient(&sc.points, &sc.values, n_r, f) };
+        let mut grad = if nr.is_leaf() { DVec3::ZERO } else { plane_gradient(&sc.points, &sc.values, n_r, f) };
+        // The linear term may not exceed the mean anywhere in the node (no negative or
+        // runaway extrapolation from a poorly conditioned fit).
+        let limit = 2.0 * f.max(0.0) / nr.size().max(f64::MIN_POSITIVE);
+        let gl = grad.length();
+        if gl > limit {
+            grad *= limit / gl;
+        }
         (f.min(1.0), grad)
     }
 
     /// Visible fraction between nodes `r` and `s` from area-uniform point pairs, and
     /// whether it is partial (some rays blocked, some not, or no usable pair).
-    fn visibility(&self, r: u32, s: u32, rng: &mut Rng, c: &mut Counts) -> (f64, bool) {
+    /// `minor` links (power below the tolerance, never refined) take half the rays.
+    fn visibility(&self, r: u32, s: u32, minor: bool, rng: &mut Rng, c: &mut Counts) -> (f64, bool) {
         use rand::RngExt;
-        let m = self.opts.visibility_rays;
+        let m = if minor { self.opts.visibility_rays.div_ceil(2) } else { self.opts.visibility_rays };
         let (mut valid, mut seen) = (0u32, 0u32);
         let mesh = self.mesh;
         for t in 0..m {

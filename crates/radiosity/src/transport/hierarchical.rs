@@ -28,6 +28,14 @@ use super::Transport;
 use crate::mesh::Mesh;
 use crate::Rgb;
 
+/// The clamped cosine `max(0, t)` to second order in Legendre polynomials,
+/// `1/4 + t/2 + 5/16 · P₂(t) = 3/32 + t/2 + 15/32 t²`: how a cluster receiver's leaves,
+/// whatever their normal `n`, take irradiance arriving from direction `d` (`t = n·d`).
+/// Irradiance is a low-frequency function of the normal (Ramamoorthi & Hanrahan 2001), so
+/// over the many directions a cluster receives from the error is small; for one direction
+/// it is at most 0.094 of the peak. Links from emitters never go to cluster receivers.
+pub const CLAMPED_COS: [f64; 3] = [3.0 / 32.0, 0.5, 15.0 / 32.0];
+
 /// Marks "no child".
 pub const NONE: u32 = u32::MAX;
 
@@ -157,7 +165,6 @@ impl Tree {
         };
         nodes.push(blank);
         let mut stack = vec![0u32];
-        let mut plane_area: std::collections::HashMap<u32, f64> = std::collections::HashMap::new();
         while let Some(k) = stack.pop() {
             let (first, count, depth) = {
                 let nd = &nodes[k as usize];
@@ -172,15 +179,24 @@ impl Tree {
             }
             let mut mid = 0;
             if !one_plane {
-                // The plane with the most area, split off when it holds half the node's.
-                plane_area.clear();
-                let mut total = 0.0;
+                // The plane with the most area, split off when it holds half the node's
+                // (sorted by plane, then runs summed: a hash map cleared per node cost
+                // O(n) each at the conference room's 100k planes).
+                slice.sort_unstable_by_key(|&e| (plane[e as usize], e));
+                let total: f64 = slice.iter().map(|&e| mesh.elements[e as usize].area).sum();
+                let (mut best, mut a, mut run, mut cur) = (u32::MAX, 0.0, 0.0, u32::MAX);
                 for &e in slice.iter() {
-                    let a = mesh.elements[e as usize].area;
-                    total += a;
-                    *plane_area.entry(plane[e as usize]).or_insert(0.0) += a;
+                    let p = plane[e as usize];
+                    if p != cur {
+                        cur = p;
+                        run = 0.0;
+                    }
+                    run += mesh.elements[e as usize].area;
+                    if run > a {
+                        a = run;
+                        best = p;
+                    }
                 }
-                let (&best, &a) = plane_area.iter().max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(a.0))).expect("non-empty");
                 if a >= 0.5 * total {
                     slice.sort_by_key(|&e| plane[e as usize] != best);
                     mid = slice.iter().position(|&e| plane[e as usize] != best).unwrap_or(count);
@@ -318,6 +334,8 @@ pub struct HierarchyStats {
     pub links: u64,
     /// Links whose source is a cluster (several planes).
     pub cluster_links: u64,
+    /// Links whose receiver is a cluster (irradiance by direction, see [`CLAMPED_COS`]).
+    pub cluster_receiver_links: u64,
     /// Links between two leaves (single elements).
     pub leaf_links: u64,
     /// Links received per tree depth (index = depth).
@@ -364,7 +382,10 @@ impl Link {
     /// dark underside (the classroom ceiling was 27 % dark without it).
     pub fn directional(s: &Node, d: DVec3) -> [f32; 4] {
         let p = s.projected_area(d);
-        if !(p > 0.0) {
+        // Seen almost edge-on the reading divides by a vanishing projected area: rounding
+        // of the f32 coefficients would dominate (raw row sums of 2 000 in the classroom).
+        // Such links carry almost nothing (their factor has the same projected area).
+        if !(p > 0.01 * s.area as f64) {
             return Link::MEAN;
         }
         let half_abs = p - 0.5 * s.n_sum.as_dvec3().dot(d);
@@ -384,6 +405,10 @@ pub struct Hierarchy {
     link_f: Vec<f32>,
     link_g: Vec<[f32; 3]>,
     link_dir: Vec<[f32; 4]>,
+    /// Per node: its slot in the quadratic-irradiance buffer when it is a cluster that
+    /// receives or passes on cluster-receiver links, else [`NONE`].
+    quad_slot: Vec<u32>,
+    quad_slots: usize,
     /// Per element: scale applied to what it gathers (1 unless its links summed above 1).
     scale: Vec<f32>,
     /// What it holds.
@@ -393,33 +418,59 @@ pub struct Hierarchy {
 impl Hierarchy {
     /// Assembles the operator from the tree and links (any order), measures every leaf's
     /// row sum over its own and its ancestors' links and scales rows above one to one.
-    pub fn new(tree: Tree, mut links: Vec<Link>, mut stats: HierarchyStats) -> Hierarchy {
-        links.par_sort_unstable_by_key(|l| (l.r, l.s));
+    pub fn new(tree: Tree, links: Vec<Link>, stats: HierarchyStats) -> Hierarchy {
+        Hierarchy::from_parts(tree, vec![links], stats)
+    }
+
+    /// As [`Hierarchy::new`] from several lists of links (one per refinement task), each
+    /// dropped as soon as it is stored: links are placed by a counting sort on the receiver,
+    /// so the peak is the stored links plus one task's list, not three copies of all.
+    pub fn from_parts(tree: Tree, mut parts: Vec<Vec<Link>>, mut stats: HierarchyStats) -> Hierarchy {
         let m = tree.nodes.len();
+        let total: usize = parts.iter().map(Vec::len).sum();
         let mut link_start = vec![0u32; m + 1];
-        for l in &links {
+        let depth = tree.nodes.iter().map(|n| n.depth as usize).max().unwrap_or(0);
+        stats.links_per_depth = vec![0; depth + 1];
+        for l in parts.iter().flatten() {
             link_start[l.r as usize + 1] += 1;
+            let (nr, ns) = (&tree.nodes[l.r as usize], &tree.nodes[l.s as usize]);
+            stats.links_per_depth[nr.depth as usize] += 1;
+            stats.cluster_links += !ns.surface as u64;
+            stats.cluster_receiver_links += !nr.surface as u64;
+            stats.leaf_links += (nr.is_leaf() && ns.is_leaf()) as u64;
         }
         for k in 0..m {
             link_start[k + 1] += link_start[k];
         }
-        let link_src = links.iter().map(|l| l.s).collect();
-        let link_f = links.iter().map(|l| l.f).collect();
-        let link_g = links.iter().map(|l| l.g).collect();
-        let link_dir = links.iter().map(|l| l.dir).collect();
-        stats.links = links.len() as u64;
+        let mut fill: Vec<u32> = link_start[..m].to_vec();
+        let mut link_src = vec![0u32; total];
+        let mut link_f = vec![0f32; total];
+        let mut link_g = vec![[0f32; 3]; total];
+        let mut link_dir = vec![[0f32; 4]; total];
+        for part in parts.iter_mut() {
+            for l in part.drain(..) {
+                let p = fill[l.r as usize] as usize;
+                fill[l.r as usize] += 1;
+                link_src[p] = l.s;
+                link_f[p] = l.f;
+                link_g[p] = l.g;
+                link_dir[p] = l.dir;
+            }
+            *part = Vec::new();
+        }
+        stats.links = total as u64;
         stats.nodes = m as u64;
         stats.surface_nodes = tree.nodes.iter().filter(|n| n.surface).count() as u64;
-        stats.cluster_links = links.iter().filter(|l| !tree.nodes[l.s as usize].surface).count() as u64;
-        stats.leaf_links =
-            links.iter().filter(|l| tree.nodes[l.r as usize].is_leaf() && tree.nodes[l.s as usize].is_leaf()).count() as u64;
-        let depth = tree.nodes.iter().map(|n| n.depth as usize).max().unwrap_or(0);
-        stats.links_per_depth = vec![0; depth + 1];
-        for l in &links {
-            stats.links_per_depth[tree.nodes[l.r as usize].depth as usize] += 1;
-        }
         let n = tree.order.len();
-        let mut h = Hierarchy { tree, link_start, link_src, link_f, link_g, link_dir, scale: vec![1.0; n], stats };
+        let mut quad_slot = vec![NONE; m];
+        let mut quad_slots = 0usize;
+        for k in 0..m {
+            if !tree.nodes[k].surface {
+                quad_slot[k] = quad_slots as u32;
+                quad_slots += 1;
+            }
+        }
+        let mut h = Hierarchy { tree, link_start, link_src, link_f, link_g, link_dir, quad_slot, quad_slots, scale: vec![1.0; n], stats };
         // Row sums: the product with x = 1 (every node's mean is 1).
         let sums = h.row_sums();
         let mut scaled = 0;
@@ -478,21 +529,29 @@ impl Hierarchy {
         }
         // Gather per receiver node: irradiance at its centroid and its gradient (one
         // spatial vector per colour channel).
+        // A cluster receiver holds its irradiance as a function of the normal instead,
+        // `s + L·n + nᵀQn` per channel (s in the scalar, L in the gradient slots, Q here).
         let mut g: Vec<(Rgb, [DVec3; 3])> = vec![(Rgb::ZERO, [DVec3::ZERO; 3]); m];
+        let mut quad = vec![[[0.0f64; 6]; 3]; self.quad_slots];
         g.par_iter_mut().enumerate().with_min_len(256).for_each(|(k, gk)| {
             let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
             let mut acc = Rgb::ZERO;
             let mut grad = [DVec3::ZERO; 3];
+            if !nodes[k].surface {
+                // Cluster receiver: its own links' quadratic part is added below.
+                for t in a..b {
+                    let w = self.source_value(t, &mean, &nb) * self.link_f[t] as f64;
+                    let d = Vec3::from_array(self.link_g[t]).as_dvec3();
+                    acc += w * CLAMPED_COS[0];
+                    for c in 0..3 {
+                        grad[c] += d * (w[c] * CLAMPED_COS[1]);
+                    }
+                }
+                *gk = (acc, grad);
+                return;
+            }
             for t in a..b {
-                let s = self.link_src[t] as usize;
-                let dir = self.link_dir[t];
-                let src = if dir == Link::MEAN {
-                    mean[s]
-                } else {
-                    let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
-                    let n = &nb[s];
-                    (mean[s] * dir[0] as f64 + Rgb::new(beta.dot(n[0]), beta.dot(n[1]), beta.dot(n[2]))).max(Rgb::ZERO)
-                };
+                let src = self.source_value(t, &mean, &nb);
                 acc += src * self.link_f[t] as f64;
                 let gl = self.link_g[t];
                 if gl != [0.0; 3] {
@@ -504,10 +563,62 @@ impl Hierarchy {
             }
             *gk = (acc, grad);
         });
-        // Push: every ancestor's irradiance, evaluated at the child's centroid, top-down.
+        for k in 0..m {
+            let slot = self.quad_slot[k];
+            if slot == NONE {
+                continue;
+            }
+            let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
+            let q = &mut quad[slot as usize];
+            for t in a..b {
+                let w = self.source_value(t, &mean, &nb) * self.link_f[t] as f64;
+                let d = Vec3::from_array(self.link_g[t]).as_dvec3();
+                let dd = [d.x * d.x, d.y * d.y, d.z * d.z, 2.0 * d.x * d.y, 2.0 * d.x * d.z, 2.0 * d.y * d.z];
+                for c in 0..3 {
+                    for (qc, ddc) in q[c].iter_mut().zip(dd) {
+                        *qc += w[c] * CLAMPED_COS[2] * ddc;
+                    }
+                }
+            }
+        }
+        // Push: every ancestor's irradiance, evaluated at the child's centroid, top-down;
+        // a cluster's normal-dependent irradiance is handed to cluster children as it is and
+        // evaluated at the normal of surface children.
         for k in 0..m {
             let nd = &nodes[k];
             let (v, grad) = g[k];
+            let slot = self.quad_slot[k];
+            if slot != NONE {
+                let q = quad[slot as usize];
+                for c in nd.child {
+                    if c == NONE {
+                        continue;
+                    }
+                    let cn = &nodes[c as usize];
+                    let cs = self.quad_slot[c as usize];
+                    if cs != NONE {
+                        let gc = &mut g[c as usize];
+                        gc.0 += v;
+                        for t in 0..3 {
+                            gc.1[t] += grad[t];
+                        }
+                        let qc = &mut quad[cs as usize];
+                        for t in 0..3 {
+                            for u in 0..6 {
+                                qc[t][u] += q[t][u];
+                            }
+                        }
+                    } else {
+                        let n = cn.normal();
+                        let nn = [n.x * n.x, n.y * n.y, n.z * n.z, n.x * n.y, n.x * n.z, n.y * n.z];
+                        let e = |t: usize| {
+                            v[t] + grad[t].dot(n) + q[t].iter().zip(nn).map(|(a, b)| a * b).sum::<f64>()
+                        };
+                        g[c as usize].0 += Rgb::new(e(0), e(1), e(2)).max(Rgb::ZERO);
+                    }
+                }
+                continue;
+            }
             if nd.child[0] != NONE {
                 for c in nd.child {
                     let d = (nodes[c as usize].centroid - nd.centroid).as_dvec3();
@@ -525,9 +636,26 @@ impl Hierarchy {
         }
     }
 
+    /// The radiosity link `t` reads from its source: the area-weighted mean, or for a
+    /// cluster its directional reading ([`Link::directional`]).
+    #[inline]
+    fn source_value(&self, t: usize, mean: &[Rgb], nb: &[[DVec3; 3]]) -> Rgb {
+        let s = self.link_src[t] as usize;
+        let dir = self.link_dir[t];
+        if dir == Link::MEAN {
+            mean[s]
+        } else {
+            let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
+            let n = &nb[s];
+            (mean[s] * dir[0] as f64 + Rgb::new(beta.dot(n[0]), beta.dot(n[1]), beta.dot(n[2]))).max(Rgb::ZERO)
+        }
+    }
+
     /// The power the links carry for radiosity `x`, `Σ_links A_R · f · B̃_S` (luminance of
-    /// RGB), summed link by link without the push: what the leaves must receive in all
-    /// (the push–pull conservation check; equal to `Σ_i A_i (F·x)_i` while no row is scaled).
+    /// RGB; for a cluster receiver each leaf's share by its normal, see [`CLAMPED_COS`]),
+    /// summed link by link without the push: what the leaves must receive in all (the
+    /// push–pull conservation check; equal to `Σ_i A_i (F·x)_i` while no row is scaled and
+    /// no leaf's normal-dependent irradiance is clamped at zero).
     pub fn link_power(&self, x: &[Rgb]) -> f64 {
         let nodes = &self.tree.nodes;
         let mut total = 0.0;
@@ -553,7 +681,19 @@ impl Hierarchy {
                 } else {
                     (mean * dir[0] as f64 + Rgb::new(beta.dot(nb[0]), beta.dot(nb[1]), beta.dot(nb[2]))).max(Rgb::ZERO)
                 };
-                total += nodes[k].area as f64 * self.link_f[t] as f64 * crate::luminance(src);
+                let w = self.link_f[t] as f64 * crate::luminance(src);
+                if nodes[k].surface {
+                    total += nodes[k].area as f64 * w;
+                } else {
+                    // A cluster receiver: each leaf by its normal (unclamped).
+                    let d = Vec3::from_array(self.link_g[t]).as_dvec3();
+                    let r = &nodes[k];
+                    for slot in r.first..r.first + r.count {
+                        let leaf = &nodes[self.tree.leaf_of[self.tree.order[slot as usize] as usize] as usize];
+                        let c = leaf.normal().dot(d);
+                        total += leaf.area as f64 * w * (CLAMPED_COS[0] + CLAMPED_COS[1] * c + CLAMPED_COS[2] * c * c);
+                    }
+                }
             }
         }
         total

@@ -26,3 +26,27 @@ pub fn shared(rel: &str) -> Option<std::path::PathBuf> {
         None
     }
 }
+
+/// The six faces of an axis-aligned box, wound outward (or inward for a room).
+pub fn box_faces(lo: DVec3, hi: DVec3, inward: bool) -> Vec<Vec<DVec3>> {
+    let c = [
+        DVec3::new(lo.x, lo.y, lo.z),
+        DVec3::new(hi.x, lo.y, lo.z),
+        DVec3::new(hi.x, hi.y, lo.z),
+        DVec3::new(lo.x, hi.y, lo.z),
+        DVec3::new(lo.x, lo.y, hi.z),
+        DVec3::new(hi.x, lo.y, hi.z),
+        DVec3::new(hi.x, hi.y, hi.z),
+        DVec3::new(lo.x, hi.y, hi.z),
+    ];
+    let q = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [2, 3, 7, 6], [1, 2, 6, 5], [0, 4, 7, 3]];
+    q.iter()
+        .map(|f| {
+            let mut p: Vec<DVec3> = f.iter().map(|&k| c[k]).collect();
+            if inward {
+                p.reverse();
+            }
+            p
+        })
+        .collect()
+}
