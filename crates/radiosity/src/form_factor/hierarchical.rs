@@ -109,13 +109,14 @@ impl Options {
 pub const PREDICTED_LINKS_PER_ELEMENT: f64 = 400.0;
 
 /// Peak memory of the hierarchical operator for `elements` elements at `separation`:
-/// links (36 bytes stored, and one more copy while the refinement tasks hold them), the
-/// tree (two nodes per element) and the solver's per-node buffers. Checked before any
-/// work against the memory limit.
+/// links (36 bytes each while the refinement tasks hold them, then about 16 stored: source,
+/// factor and, where they exist, gradient or direction and a cluster's reading), the tree
+/// (two nodes per element) and the solver's per-node buffers. Checked before any work
+/// against the memory limit.
 pub fn predict_memory(elements: u64, separation: f64) -> u64 {
     let links = PREDICTED_LINKS_PER_ELEMENT * (DEFAULT_SEPARATION / separation).powi(2) * elements as f64;
     let node = std::mem::size_of::<Node>() as f64 + 400.0; // node + pull/push buffers
-    (links * 2.0 * 36.0 + elements as f64 * 2.0 * node) as u64
+    (links * (36.0 + 16.0) + elements as f64 * 2.0 * node) as u64
 }
 
 /// Source frontier size (far-field summary of a source node).

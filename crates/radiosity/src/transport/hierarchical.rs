@@ -366,7 +366,8 @@ pub struct Link {
     pub g: [f32; 3],
     /// How the source's radiosity is read: `α · B̄_s + β · N_B(s)` with `N_B = Σ A_j B_j n_j`
     /// ([`Link::directional`] for a cluster seen from one direction; `[1, 0, 0, 0]`, the
-    /// plain mean, for a surface node).
+    /// plain mean, for a surface node). Stored only for cluster sources, and `g` only for
+    /// receivers above the leaves: the operator keeps about 16 bytes per link.
     pub dir: [f32; 4],
 }
 
@@ -403,8 +404,16 @@ pub struct Hierarchy {
     link_start: Vec<u32>,
     link_src: Vec<u32>,
     link_f: Vec<f32>,
+    /// The vectors of the links of non-leaf receivers (gradient, or a cluster receiver's
+    /// direction): node `k`'s at `g_base[k] ..` in its link order; [`NONE`] for leaves,
+    /// whose links have none.
     link_g: Vec<[f32; 3]>,
+    g_base: Vec<u32>,
+    /// The directional readings of links from cluster sources, which come last in each
+    /// receiver's list (`cluster_count[k]` of them): at `dir_base[k] ..`.
     link_dir: Vec<[f32; 4]>,
+    dir_base: Vec<u32>,
+    cluster_count: Vec<u32>,
     /// Per node: its slot in the quadratic-irradiance buffer when it is a cluster that
     /// receives or passes on cluster-receiver links, else [`NONE`].
     quad_slot: Vec<u32>,
@@ -429,10 +438,12 @@ impl Hierarchy {
         let m = tree.nodes.len();
         let total: usize = parts.iter().map(Vec::len).sum();
         let mut link_start = vec![0u32; m + 1];
+        let mut cluster_count = vec![0u32; m];
         let depth = tree.nodes.iter().map(|n| n.depth as usize).max().unwrap_or(0);
         stats.links_per_depth = vec![0; depth + 1];
         for l in parts.iter().flatten() {
             link_start[l.r as usize + 1] += 1;
+            cluster_count[l.r as usize] += !tree.nodes[l.s as usize].surface as u32;
             let (nr, ns) = (&tree.nodes[l.r as usize], &tree.nodes[l.s as usize]);
             stats.links_per_depth[nr.depth as usize] += 1;
             stats.cluster_links += !ns.surface as u64;
@@ -442,19 +453,41 @@ impl Hierarchy {
         for k in 0..m {
             link_start[k + 1] += link_start[k];
         }
-        let mut fill: Vec<u32> = link_start[..m].to_vec();
+        // Extras only where they exist: vectors for non-leaf receivers, readings for
+        // cluster sources (placed last in each receiver's list).
+        let (mut g_base, mut dir_base) = (vec![NONE; m], vec![0u32; m]);
+        let (mut ng, mut nd) = (0usize, 0usize);
+        for k in 0..m {
+            let count = (link_start[k + 1] - link_start[k]) as usize;
+            if !tree.nodes[k].is_leaf() && count > 0 {
+                g_base[k] = ng as u32;
+                ng += count;
+            }
+            dir_base[k] = nd as u32;
+            nd += cluster_count[k] as usize;
+        }
+        let mut fill_surface: Vec<u32> = link_start[..m].to_vec();
+        let mut fill_cluster: Vec<u32> = (0..m).map(|k| link_start[k + 1] - cluster_count[k]).collect();
         let mut link_src = vec![0u32; total];
         let mut link_f = vec![0f32; total];
-        let mut link_g = vec![[0f32; 3]; total];
-        let mut link_dir = vec![[0f32; 4]; total];
+        let mut link_g = vec![[0f32; 3]; ng];
+        let mut link_dir = vec![[0f32; 4]; nd];
         for part in parts.iter_mut() {
             for l in part.drain(..) {
-                let p = fill[l.r as usize] as usize;
-                fill[l.r as usize] += 1;
+                let k = l.r as usize;
+                let cluster_source = !tree.nodes[l.s as usize].surface;
+                let fill = if cluster_source { &mut fill_cluster[k] } else { &mut fill_surface[k] };
+                let p = *fill as usize;
+                *fill += 1;
                 link_src[p] = l.s;
                 link_f[p] = l.f;
-                link_g[p] = l.g;
-                link_dir[p] = l.dir;
+                if g_base[k] != NONE {
+                    link_g[g_base[k] as usize + p - link_start[k] as usize] = l.g;
+                }
+                if cluster_source {
+                    let first = (link_start[k + 1] - cluster_count[k]) as usize;
+                    link_dir[dir_base[k] as usize + p - first] = l.dir;
+                }
             }
             *part = Vec::new();
         }
@@ -470,7 +503,21 @@ impl Hierarchy {
                 quad_slots += 1;
             }
         }
-        let mut h = Hierarchy { tree, link_start, link_src, link_f, link_g, link_dir, quad_slot, quad_slots, scale: vec![1.0; n], stats };
+        let mut h = Hierarchy {
+            tree,
+            link_start,
+            link_src,
+            link_f,
+            link_g,
+            g_base,
+            link_dir,
+            dir_base,
+            cluster_count,
+            quad_slot,
+            quad_slots,
+            scale: vec![1.0; n],
+            stats,
+        };
         // Row sums: the product with x = 1 (every node's mean is 1).
         let sums = h.row_sums();
         let mut scaled = 0;
@@ -540,8 +587,8 @@ impl Hierarchy {
             if !nodes[k].surface {
                 // Cluster receiver: its own links' quadratic part is added below.
                 for t in a..b {
-                    let w = self.source_value(t, &mean, &nb) * self.link_f[t] as f64;
-                    let d = Vec3::from_array(self.link_g[t]).as_dvec3();
+                    let w = self.source_value(k, t, &mean, &nb) * self.link_f[t] as f64;
+                    let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
                     acc += w * CLAMPED_COS[0];
                     for c in 0..3 {
                         grad[c] += d * (w[c] * CLAMPED_COS[1]);
@@ -551,9 +598,9 @@ impl Hierarchy {
                 return;
             }
             for t in a..b {
-                let src = self.source_value(t, &mean, &nb);
+                let src = self.source_value(k, t, &mean, &nb);
                 acc += src * self.link_f[t] as f64;
-                let gl = self.link_g[t];
+                let gl = self.vec_of(k, t);
                 if gl != [0.0; 3] {
                     let gv = Vec3::from_array(gl).as_dvec3();
                     for (c, gc) in grad.iter_mut().enumerate() {
@@ -571,8 +618,8 @@ impl Hierarchy {
             let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
             let q = &mut quad[slot as usize];
             for t in a..b {
-                let w = self.source_value(t, &mean, &nb) * self.link_f[t] as f64;
-                let d = Vec3::from_array(self.link_g[t]).as_dvec3();
+                let w = self.source_value(k, t, &mean, &nb) * self.link_f[t] as f64;
+                let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
                 let dd = [d.x * d.x, d.y * d.y, d.z * d.z, 2.0 * d.x * d.y, 2.0 * d.x * d.z, 2.0 * d.y * d.z];
                 for c in 0..3 {
                     for (qc, ddc) in q[c].iter_mut().zip(dd) {
@@ -636,12 +683,32 @@ impl Hierarchy {
         }
     }
 
+    /// The vector of link `t` of receiver `k` (zero for a leaf receiver).
+    #[inline]
+    fn vec_of(&self, k: usize, t: usize) -> [f32; 3] {
+        match self.g_base[k] {
+            NONE => [0.0; 3],
+            b => self.link_g[b as usize + t - self.link_start[k] as usize],
+        }
+    }
+
+    /// How link `t` of receiver `k` reads its source ([`Link::MEAN`] for a surface source).
+    #[inline]
+    fn read_of(&self, k: usize, t: usize) -> [f32; 4] {
+        let first = (self.link_start[k + 1] - self.cluster_count[k]) as usize;
+        if t < first {
+            Link::MEAN
+        } else {
+            self.link_dir[self.dir_base[k] as usize + t - first]
+        }
+    }
+
     /// The radiosity link `t` reads from its source: the area-weighted mean, or for a
     /// cluster its directional reading ([`Link::directional`]).
     #[inline]
-    fn source_value(&self, t: usize, mean: &[Rgb], nb: &[[DVec3; 3]]) -> Rgb {
+    fn source_value(&self, k: usize, t: usize, mean: &[Rgb], nb: &[[DVec3; 3]]) -> Rgb {
         let s = self.link_src[t] as usize;
-        let dir = self.link_dir[t];
+        let dir = self.read_of(k, t);
         if dir == Link::MEAN {
             mean[s]
         } else {
@@ -674,7 +741,7 @@ impl Hierarchy {
                     nb = [nb[0] + n * v.x, nb[1] + n * v.y, nb[2] + n * v.z];
                 }
                 let mean = if s.area > 0.0 { sum / s.area as f64 } else { Rgb::ZERO };
-                let dir = self.link_dir[t];
+                let dir = self.read_of(k, t);
                 let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
                 let src = if dir == Link::MEAN {
                     mean
@@ -686,7 +753,7 @@ impl Hierarchy {
                     total += nodes[k].area as f64 * w;
                 } else {
                     // A cluster receiver: each leaf by its normal (unclamped).
-                    let d = Vec3::from_array(self.link_g[t]).as_dvec3();
+                    let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
                     let r = &nodes[k];
                     for slot in r.first..r.first + r.count {
                         let leaf = &nodes[self.tree.leaf_of[self.tree.order[slot as usize] as usize] as usize];
@@ -725,6 +792,7 @@ impl Transport for Hierarchy {
             + self.link_f.len() * 4
             + self.link_g.len() * 12
             + self.link_dir.len() * 16
+            + (self.g_base.len() + self.dir_base.len() + self.cluster_count.len()) * 4
             + self.scale.len() * 4
     }
 }
