@@ -206,7 +206,7 @@ pub fn link(
         }
     }
     let total_power = (emitted + ambient * area).max(f64::MIN_POSITIVE);
-    let (lo, hi) = mesh.positions.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), p| (l.min(*p), h.max(*p)));
+    let (lo, hi) = geom::bounds_3d(&mesh.positions);
     let ctx = Ctx {
         tree: &tree,
         mesh,
@@ -266,6 +266,18 @@ pub fn link(
     }
     drop(ctx);
     Ok((Hierarchy::from_parts(tree, parts, stats), total_rays.load(Ordering::Relaxed)))
+}
+
+/// `(size_R + size_S) / r` between the centroids; infinite when the boxes overlap (never
+/// well separated).
+fn separation_ratio(nr: &Node, ns: &Node) -> f64 {
+    let dist = (ns.centroid - nr.centroid).length() as f64;
+    let boxes_apart = nr.lo.cmpgt(ns.hi).any() || ns.lo.cmpgt(nr.hi).any();
+    if boxes_apart && dist > 0.0 {
+        (nr.size() + ns.size()) / dist
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// Range of the signed distance of a box's corners from a plane.
@@ -340,9 +352,7 @@ impl Ctx<'_> {
                 }
                 continue;
             }
-            let dist = (ns.centroid - nr.centroid).length() as f64;
-            let boxes_apart = nr.lo.cmpgt(ns.hi).any() || ns.lo.cmpgt(nr.hi).any();
-            let ratio = if boxes_apart && dist > 0.0 { (nr.size() + ns.size()) / dist } else { f64::INFINITY };
+            let ratio = separation_ratio(nr, ns);
             if ratio < self.opts.separation {
                 // Only candidate links are estimated (pairs that will be split are not).
                 let (f, g) = self.estimate(r, s, ratio, &mut scratch);
@@ -398,9 +408,7 @@ impl Ctx<'_> {
                 return; // R behind S
             }
         }
-        let dist = (ns.centroid - nr.centroid).length() as f64;
-        let boxes_apart = nr.lo.cmpgt(ns.hi).any() || ns.lo.cmpgt(nr.hi).any();
-        let ratio = if boxes_apart && dist > 0.0 { (nr.size() + ns.size()) / dist } else { f64::INFINITY };
+        let ratio = separation_ratio(nr, ns);
         if ratio < self.opts.separation && !self.emits_any[s as usize] {
             let x = nr.centroid.as_dvec3();
             self.tree.frontier(s, SOURCE_FRONTIER, &mut sc.frontier);

@@ -25,6 +25,7 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use super::Transport;
+use crate::geom::bounds_3d;
 use crate::mesh::Mesh;
 use crate::Rgb;
 
@@ -136,7 +137,7 @@ impl Tree {
         if n == 0 {
             return Tree::default();
         }
-        let (lo, hi) = mesh.positions.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), p| (l.min(*p), h.max(*p)));
+        let (lo, hi) = bounds_3d(&mesh.positions);
         let quantum = ((hi - lo).length() * 1e-6).max(f64::MIN_POSITIVE);
         // Plane ids per element.
         let mut ids = std::collections::HashMap::new();
@@ -232,7 +233,7 @@ impl Tree {
                 leaf_of[ei] = k as u32;
                 let e = &mesh.elements[ei];
                 let (c, nv) = e.corners(&mesh.positions);
-                let (l, h) = c[..nv].iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), p| (l.min(*p), h.max(*p)));
+                let (l, h) = bounds_3d(&c[..nv]);
                 let a = area[ei];
                 let nn = e.normal;
                 let node = &mut nodes[k];
@@ -417,7 +418,8 @@ pub struct Hierarchy {
     /// Per node: its slot in the quadratic-irradiance buffer when it is a cluster that
     /// receives or passes on cluster-receiver links, else [`NONE`].
     quad_slot: Vec<u32>,
-    quad_slots: usize,
+    /// The node of every slot.
+    quad_node: Vec<u32>,
     /// Per element: scale applied to what it gathers (1 unless its links summed above 1).
     scale: Vec<f32>,
     /// What it holds.
@@ -495,13 +497,10 @@ impl Hierarchy {
         stats.nodes = m as u64;
         stats.surface_nodes = tree.nodes.iter().filter(|n| n.surface).count() as u64;
         let n = tree.order.len();
+        let quad_node: Vec<u32> = (0..m as u32).filter(|&k| !tree.nodes[k as usize].surface).collect();
         let mut quad_slot = vec![NONE; m];
-        let mut quad_slots = 0usize;
-        for k in 0..m {
-            if !tree.nodes[k].surface {
-                quad_slot[k] = quad_slots as u32;
-                quad_slots += 1;
-            }
+        for (slot, &k) in quad_node.iter().enumerate() {
+            quad_slot[k as usize] = slot as u32;
         }
         let mut h = Hierarchy {
             tree,
@@ -514,7 +513,7 @@ impl Hierarchy {
             dir_base,
             cluster_count,
             quad_slot,
-            quad_slots,
+            quad_node,
             scale: vec![1.0; n],
             stats,
         };
@@ -579,24 +578,13 @@ impl Hierarchy {
         // A cluster receiver holds its irradiance as a function of the normal instead,
         // `s + L·n + nᵀQn` per channel (s in the scalar, L in the gradient slots, Q here).
         let mut g: Vec<(Rgb, [DVec3; 3])> = vec![(Rgb::ZERO, [DVec3::ZERO; 3]); m];
-        let mut quad = vec![[[0.0f64; 6]; 3]; self.quad_slots];
         g.par_iter_mut().enumerate().with_min_len(256).for_each(|(k, gk)| {
+            if !nodes[k].surface {
+                return; // cluster receivers below
+            }
             let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
             let mut acc = Rgb::ZERO;
             let mut grad = [DVec3::ZERO; 3];
-            if !nodes[k].surface {
-                // Cluster receiver: its own links' quadratic part is added below.
-                for t in a..b {
-                    let w = self.source_value(k, t, &mean, &nb) * self.link_f[t] as f64;
-                    let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
-                    acc += w * CLAMPED_COS[0];
-                    for c in 0..3 {
-                        grad[c] += d * (w[c] * CLAMPED_COS[1]);
-                    }
-                }
-                *gk = (acc, grad);
-                return;
-            }
             for t in a..b {
                 let src = self.source_value(k, t, &mean, &nb);
                 acc += src * self.link_f[t] as f64;
@@ -610,23 +598,34 @@ impl Hierarchy {
             }
             *gk = (acc, grad);
         });
-        for k in 0..m {
-            let slot = self.quad_slot[k];
-            if slot == NONE {
-                continue;
-            }
-            let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
-            let q = &mut quad[slot as usize];
-            for t in a..b {
-                let w = self.source_value(k, t, &mean, &nb) * self.link_f[t] as f64;
-                let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
-                let dd = [d.x * d.x, d.y * d.y, d.z * d.z, 2.0 * d.x * d.y, 2.0 * d.x * d.z, 2.0 * d.y * d.z];
-                for c in 0..3 {
-                    for (qc, ddc) in q[c].iter_mut().zip(dd) {
-                        *qc += w[c] * CLAMPED_COS[2] * ddc;
+        // Cluster receivers: each link from direction d adds w·(3/32 + ½ n·d + 15/32 (n·d)²).
+        let cluster: Vec<(Rgb, [DVec3; 3], [[f64; 6]; 3])> = self
+            .quad_node
+            .par_iter()
+            .with_min_len(64)
+            .map(|&k| {
+                let k = k as usize;
+                let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
+                let (mut s, mut l, mut q) = (Rgb::ZERO, [DVec3::ZERO; 3], [[0.0f64; 6]; 3]);
+                for t in a..b {
+                    let w = self.source_value(k, t, &mean, &nb) * self.link_f[t] as f64;
+                    let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
+                    let dd = [d.x * d.x, d.y * d.y, d.z * d.z, 2.0 * d.x * d.y, 2.0 * d.x * d.z, 2.0 * d.y * d.z];
+                    s += w * CLAMPED_COS[0];
+                    for c in 0..3 {
+                        l[c] += d * (w[c] * CLAMPED_COS[1]);
+                        for (qc, ddc) in q[c].iter_mut().zip(dd) {
+                            *qc += w[c] * CLAMPED_COS[2] * ddc;
+                        }
                     }
                 }
-            }
+                (s, l, q)
+            })
+            .collect();
+        let mut quad = Vec::with_capacity(cluster.len());
+        for (&k, (s, l, q)) in self.quad_node.iter().zip(cluster) {
+            g[k as usize] = (s, l);
+            quad.push(q);
         }
         // Push: every ancestor's irradiance, evaluated at the child's centroid, top-down;
         // a cluster's normal-dependent irradiance is handed to cluster children as it is and
