@@ -31,13 +31,17 @@ pub fn stopped() -> bool {
 /// still print unless quiet).
 pub struct CliProgress {
     bar: Mutex<Option<ProgressBar>>,
+    /// The current stage and when it began (for the log line when stderr is no terminal).
+    stage: Mutex<Option<(String, std::time::Instant)>>,
     quiet: bool,
+    log: bool,
 }
 
 impl CliProgress {
     /// A reporter.
     pub fn new(quiet: bool) -> Self {
-        CliProgress { bar: Mutex::new(None), quiet }
+        use std::io::IsTerminal;
+        CliProgress { bar: Mutex::new(None), stage: Mutex::new(None), quiet, log: !std::io::stderr().is_terminal() }
     }
 }
 
@@ -55,6 +59,7 @@ impl Progress for CliProgress {
         bar.set_message(stage.to_string());
         bar.enable_steady_tick(Duration::from_millis(200));
         *self.bar.lock().unwrap() = Some(bar);
+        *self.stage.lock().unwrap() = Some((stage.to_string(), std::time::Instant::now()));
     }
     fn advance(&self, n: u64) {
         if let Some(b) = self.bar.lock().unwrap().as_ref() {
@@ -64,6 +69,14 @@ impl Progress for CliProgress {
     fn end(&self) {
         if let Some(b) = self.bar.lock().unwrap().take() {
             b.finish_and_clear();
+        }
+        // Without a terminal the bars are hidden: a log (CI, nohup) still gets one line per
+        // stage that took a while.
+        if let Some((stage, t)) = self.stage.lock().unwrap().take() {
+            let s = t.elapsed().as_secs_f64();
+            if self.log && !self.quiet && s >= 1.0 {
+                eprintln!("{stage}: {s:.1} s");
+            }
         }
     }
     fn message(&self, msg: &str) {
