@@ -2,8 +2,11 @@
 # Scaling series for the hierarchical operator (issue 10): the RenderPark classroom tiled
 # k × k (each copy shifted by its floor's size plus a gap, so the rooms are closed and see
 # each other only through the rays' visibility), solved with `--transport hierarchical`.
-# Prints triangles, elements, links, wall seconds and peak resident memory per k, and the
-# growth exponents of time and memory against elements (least squares on log–log).
+# Prints triangles (of the OBJ faces, fanned), elements, links, wall seconds and peak
+# resident memory per k, and the growth exponents of time and memory against elements
+# (least squares on log–log). The classroom's own mesh size (0.3853) and, as the link
+# minimum size, the same (the default above 50 000 elements) keep every k in one regime:
+#   EXTRA="--mesh-size 0.3853 --link-min-size 0.3853" scripts/bench-scaling.sh 1 2 4 7 10
 # Needs ../shared beside the repository.
 # Usage: scripts/bench-scaling.sh [K...]   (after cargo build --release; default: 1 2 3 4)
 #        EXTRA="--mesh-size 0.5" scripts/bench-scaling.sh 1 2 4
@@ -45,7 +48,7 @@ with open(dst, 'w') as f:
                 elif l.startswith(('g ', 'usemtl', 'o ')):
                     f.write(l + '\n')
 PY
-  tris=$(grep -c '^f ' "$OUT/tiles-$k.obj")
+  tris=$(awk '/^f /{t += NF - 3} END{print t}' "$OUT/tiles-$k.obj")
   # shellcheck disable=SC2086
   /usr/bin/time -f "%e %M" -o "$OUT/t" "$BIN" solve "$OUT/tiles-$k.obj" --transport hierarchical ${EXTRA:-} \
     -q --report "$OUT/r.json" > /dev/null 2> "$OUT/err" || { echo "k=$k failed:"; tail -3 "$OUT/err"; continue; }

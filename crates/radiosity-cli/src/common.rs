@@ -56,6 +56,20 @@ pub struct SolveFlags {
     /// several planes receive indirect light too, spread to their elements by normal.
     #[arg(long)]
     pub no_cluster_receivers: bool,
+    /// Hierarchical: nodes (groups of elements) whose bounding-box diagonal is at most
+    /// this are not split to refine a link; 0 refines down to the elements [default: the
+    /// mesh size].
+    #[arg(long, value_name = "S")]
+    pub link_min_size: Option<f64>,
+    /// Hierarchical: emitted light goes through the links too; by default a scene with
+    /// few emitting elements sends it to every element through exact factors.
+    #[arg(long)]
+    pub emitters_in_links: bool,
+    /// Hierarchical: rays per element that measure its closure (the share of its hemisphere
+    /// that meets a surface); what its links bring is scaled to close its row to it.
+    /// 0 turns the fit off.
+    #[arg(long, value_name = "N", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_CLOSURE_RAYS)]
+    pub link_closure_rays: usize,
     /// Memory the form-factor rows or the hierarchical links may use (e.g. 8G, 512M):
     /// refused before any work when the prediction is above it [default: the memory
     /// available].
@@ -134,6 +148,9 @@ impl SolveFlags {
             tolerance: self.link_tolerance,
             visibility_rays: self.link_rays,
             cluster_receivers: !self.no_cluster_receivers,
+            min_size: self.link_min_size,
+            direct_columns: !self.emitters_in_links,
+            closure_rays: self.link_closure_rays,
         };
         links.validate()?;
         let hierarchical = transport == radiosity::transport::Kind::Hierarchical;
@@ -217,7 +234,9 @@ pub fn time_budget(t: f64) -> Result<Duration> {
 /// Validates `--threads` (1 to [`MAX_THREADS`]) before any work starts.
 pub fn check_threads(threads: Option<usize>) -> Result<()> {
     match threads {
-        Some(n) if n == 0 || n > MAX_THREADS => bail!("--threads must be between 1 and {MAX_THREADS}, got {n}"),
+        Some(n) if n == 0 || n > MAX_THREADS => {
+            bail!("--threads must be between 1 and {MAX_THREADS}, got {n}")
+        }
         _ => Ok(()),
     }
 }

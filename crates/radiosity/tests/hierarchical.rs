@@ -44,6 +44,10 @@ fn push_pull_conserves_the_power_the_links_carry() {
         let scene = Scene::from_desc(builtin::cornell()).unwrap();
         let mut settings = Settings { mesh_size: Some(60.0), ..hierarchical() };
         settings.links.cluster_receivers = cluster_receivers;
+        // The links alone: no closure fit (a per-element scale after the push) and the
+        // light's power through the links, not the direct columns.
+        settings.links.closure_rays = 0;
+        settings.links.direct_columns = false;
         let solved = solve_scene(scene, &settings, &NoProgress).unwrap();
         let h = solved.transport.as_ref().unwrap().hierarchy().expect("hierarchical operator");
         assert!(h.stats.cluster_links > 0, "{:?}", h.stats);
@@ -52,12 +56,11 @@ fn push_pull_conserves_the_power_the_links_carry() {
         let n = h.len();
         let pattern: Vec<Rgb> = (0..n).map(|i| Rgb::new((i % 7) as f64, (i % 3) as f64 + 0.5, ((i * 13) % 11) as f64)).collect();
         let area: Vec<f64> = (0..n).map(|e| h.tree.nodes[h.tree.leaf_of[e] as usize].area as f64).collect();
-        // Without the row guard's scaling, to see the push itself.
-        let sums = h.row_sums();
+        // Without the row guard, to see the push itself.
         for x in [&solved.solution.radiosity, &pattern] {
             let mut y = vec![Rgb::ZERO; n];
-            h.gather(x, &mut y);
-            let received: f64 = (0..n).map(|i| area[i] * radiosity::luminance(y[i]) * sums[i].max(1.0)).sum();
+            h.gather_unguarded(x, &mut y);
+            let received: f64 = (0..n).map(|i| area[i] * radiosity::luminance(y[i])).sum();
             let carried = h.link_power(x);
             // Exact with surface receivers only; with cluster receivers a leaf whose
             // normal-dependent irradiance would be negative is clamped at zero (only adds).
@@ -155,7 +158,12 @@ fn links_are_refined_under_a_shadow_boundary() {
     let scene = Scene::from_desc(d).unwrap();
     let size = Some(0.04);
     let rows = solve_scene(scene.clone(), &Settings { mesh_size: size, ..Default::default() }, &NoProgress).unwrap();
-    let hier = solve_scene(scene, &Settings { mesh_size: size, ..hierarchical() }, &NoProgress).unwrap();
+    // The light's links (not the direct columns, which have no links to refine), refined
+    // down to the elements.
+    let mut settings = Settings { mesh_size: size, ..hierarchical() };
+    settings.links.direct_columns = false;
+    settings.links.min_size = Some(0.0);
+    let hier = solve_scene(scene, &settings, &NoProgress).unwrap();
     let h = hier.transport.as_ref().unwrap().hierarchy().unwrap();
     assert!(h.stats.partial_refined > 0, "{:?}", h.stats);
     // The floor's radiosity element by element: lit, penumbra and umbra as with rows.
@@ -250,4 +258,380 @@ fn final_gather_on_the_hierarchy_matches_rows() {
     eprintln!("hierarchical against rows: light-masked relative RMSE {:.3} %", e * 100.0);
     // Against Mitsuba at 256²: rows 1.63 %, hierarchical 1.90 % (BENCHMARKS.md).
     assert!(e <= 0.02, "light-masked relative RMSE {:.3} %", e * 100.0);
+}
+
+/// Diagnostic, run by hand: the hierarchical operator against explicit rows on one mesh of
+/// a real model. `MODEL` (default the classroom), `TWO=1` (two-sided), `SEP`, `MIN` (link
+/// minimum size; default the mesh size), `EMIT=1` (emitters in the links). Prints the
+/// area-weighted bias and spread of `H·x` against `F·x` for x = 1 (row sums) and for the
+/// rows' solution without emission (the indirect light), by kind of receiver.
+#[test]
+#[ignore]
+fn operator_against_rows() {
+    let rel = std::env::var("MODEL").unwrap_or_else(|_| "scenes/renderpark-classroom/classroom.obj".into());
+    let Some(path) = common::shared(&rel) else {
+        return;
+    };
+    let mut scene = radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    if std::env::var("TWO").is_ok() {
+        let mut d = radiosity::scene::load(path.to_str().unwrap()).unwrap();
+        d.two_sided = true;
+        scene = Scene::from_desc(d).unwrap();
+    }
+    let env = |k: &str| std::env::var(k).ok().and_then(|x| x.parse::<f64>().ok());
+    let rows =
+        solve_scene(scene.clone(), &Settings { transport: Kind::Rows, ..Default::default() }, &NoProgress).unwrap();
+    let mut hs = hierarchical();
+    if let Some(x) = env("SEP") {
+        hs.links.separation = x;
+    }
+    hs.links.min_size = env("MIN");
+    hs.links.direct_columns = std::env::var("EMIT").is_err();
+    hs.solve.max_iterations = 1;
+    let t = std::time::Instant::now();
+    let hier = solve_scene(scene, &hs, &NoProgress).unwrap();
+    let h = hier.transport.as_ref().unwrap().hierarchy().unwrap();
+    println!(
+        "links {} direct {} in {:.2} s; {:?}",
+        h.stats.links,
+        h.stats.direct_entries,
+        t.elapsed().as_secs_f64(),
+        h.stats.links_per_depth
+    );
+    let f = rows.transport.as_ref().unwrap();
+    let n = f.len();
+    assert_eq!(n, h.len());
+    let area = rows.receivers.open_areas(&rows.mesh);
+    let b = &rows.solution.radiosity;
+    let (_, e) = radiosity::pipeline::element_materials(&rows.scene, &rows.mesh);
+    let indirect: Vec<Rgb> = (0..n).map(|i| b[i] - e[i]).collect();
+    let kind = |i: usize| {
+        let leaf = h.tree.leaf_of[i] as usize;
+        // The surface node right above the leaf: alone in its plane or not.
+        let mut k = 0usize;
+        let mut path = vec![];
+        loop {
+            path.push(k);
+            if k == leaf {
+                break;
+            }
+            let c = h.tree.nodes[k].child;
+            k = if h.tree.contains(c[0], leaf as u32) { c[0] as usize } else { c[1] as usize };
+        }
+        let top_surface = path.iter().find(|&&k| h.tree.nodes[k].surface).copied().unwrap();
+        let count = h.tree.nodes[top_surface].count;
+        if count == 1 {
+            "lone element"
+        } else if count < 16 {
+            "small surface"
+        } else {
+            "large surface"
+        }
+    };
+    for (name, x) in [("row sums (x = 1)", vec![Rgb::ONE; n]), ("indirect (rows' B − E)", indirect)] {
+        let mut yr = vec![Rgb::ZERO; n];
+        let mut yh = vec![Rgb::ZERO; n];
+        f.gather(&x, &mut yr);
+        h.gather(&x, &mut yh);
+        let mut groups: std::collections::BTreeMap<&str, (f64, f64, f64, usize)> = Default::default();
+        for i in 0..n {
+            let (r, q) = (radiosity::luminance(yr[i]), radiosity::luminance(yh[i]));
+            let g = groups.entry(kind(i)).or_default();
+            g.0 += area[i] * r;
+            g.1 += area[i] * (q - r);
+            g.2 += area[i] * (q - r).abs();
+            g.3 += 1;
+            let g = groups.entry("all").or_default();
+            g.0 += area[i] * r;
+            g.1 += area[i] * (q - r);
+            g.2 += area[i] * (q - r).abs();
+            g.3 += 1;
+        }
+        println!("{name}:");
+        for (k, (tot, bias, l1, c)) in groups {
+            println!("  {k:>14}: {c:>7} elements, bias {:+.2} %, L1 {:.2} %", 100.0 * bias / tot, 100.0 * l1 / tot);
+        }
+    }
+}
+
+/// Diagnostic, run by hand: raw row sums of the hierarchical operator on a real model
+/// (`MODEL`, a path under ../shared; `TWO=1`, `SEP`, `MIN`, `EMIT=1` as in
+/// `operator_against_rows`), area-weighted, by kind of receiver: in a closed model they
+/// should be 1.
+#[test]
+#[ignore]
+fn hierarchy_row_sums() {
+    let rel = std::env::var("MODEL").unwrap_or_else(|_| "scenes/renderpark-classroom/classroom.obj".into());
+    let Some(path) = common::shared(&rel) else {
+        return;
+    };
+    let mut d = radiosity::scene::load(path.to_str().unwrap()).unwrap();
+    if std::env::var("TWO").is_ok() {
+        d.two_sided = true;
+    }
+    let scene = Scene::from_desc(d).unwrap();
+    let env = |k: &str| std::env::var(k).ok().and_then(|x| x.parse::<f64>().ok());
+    let mut hs = hierarchical();
+    if let Some(x) = env("SEP") {
+        hs.links.separation = x;
+    }
+    hs.links.min_size = env("MIN");
+    hs.links.direct_columns = std::env::var("EMIT").is_err();
+    hs.links.cluster_receivers = std::env::var("NOCR").is_err();
+    hs.solve.max_iterations = 1;
+    let t = std::time::Instant::now();
+    let hier = solve_scene(scene, &hs, &NoProgress).unwrap();
+    let h = hier.transport.as_ref().unwrap().hierarchy().unwrap();
+    println!("links {} direct {} in {:.2} s", h.stats.links, h.stats.direct_entries, t.elapsed().as_secs_f64());
+    let sums = h.row_sums();
+    let area = hier.receivers.open_areas(&hier.mesh);
+    let size = h.stats.min_size;
+    // Which elements lie in a node at the minimum size (a "terminal" cluster)?
+    let mut in_terminal = vec![false; h.len()];
+    let mut stack = vec![0u32];
+    while let Some(k) = stack.pop() {
+        let nd = &h.tree.nodes[k as usize];
+        if nd.is_leaf() {
+            continue;
+        }
+        if !nd.surface && (nd.size() <= size || (nd.area as f64) <= size * size) {
+            for slot in nd.first..nd.first + nd.count {
+                in_terminal[h.tree.order[slot as usize] as usize] = true;
+            }
+            continue;
+        }
+        stack.extend(nd.child);
+    }
+    // The true closure of a sample of elements: the fraction of cosine-distributed rays
+    // from their open points that meet a front face.
+    let mut groups: std::collections::BTreeMap<(bool, usize), (f64, f64, usize)> = Default::default();
+    let mut area_of: std::collections::BTreeMap<(bool, usize), f64> = Default::default();
+    let mut outcome = [0usize; 2];
+    let mut closed = (0.0f64, 0.0f64, 0usize, 0.0f64);
+    let mut low_closed = 0;
+    let step = (h.len() / 4000).max(1);
+    let diag = hier.scene.diagonal();
+    for i in (0..h.len()).step_by(step) {
+        if area[i] <= 0.0 {
+            continue;
+        }
+        let e = &hier.mesh.elements[i];
+        let pts = hier.receivers.points(i, 3);
+        let (t, b) = radiosity::sampling::basis(e.normal);
+        let (mut hit, mut total) = (0, 0);
+        for (k, p) in pts.iter().enumerate() {
+            for s in 0..16u32 {
+                let (u1, u2) = radiosity::sampling::halton2(s + 16 * k as u32, (0.3, 0.7));
+                let d = radiosity::sampling::cosine_hemisphere(u1, u2);
+                let dir = t * d.x + b * d.y + e.normal * d.z;
+                total += 1;
+                let o = *p + e.normal * std::env::var("OFF").ok().and_then(|x| x.parse::<f64>().ok()).unwrap_or(1e-6) * diag;
+                match hier.rays.closest_facing(o.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch)) {
+                    Some((h, q)) => {
+                        let poly = &hier.scene.polygons[q as usize];
+                        if poly.normal.dot(dir) < 0.0 {
+                            hit += 1;
+                        } else {
+                            outcome[1] += 1;
+                            if outcome[1] % 50 == 1 && std::env::var("MISSES").is_ok() {
+                                println!(
+                                    "back hit: t {:.3} from {:?} (two-sided {}) polygon {:?} (two-sided {} back {})",
+                                    h.t, hier.scene.polygons[e.patch as usize].loc, hier.scene.polygons[e.patch as usize].two_sided, poly.loc, poly.two_sided, poly.back_side
+                                );
+                            }
+                        }
+                    }
+                    None => {
+                        outcome[0] += 1;
+                        if outcome[0] % 1000 == 1 && std::env::var("MISSES").is_ok() {
+                            println!("miss: from {:.1?} dir {:.2?} n {:.2?} polygon {:?}", o, dir, e.normal, hier.scene.polygons[e.patch as usize].loc.as_ref().and_then(|l| l.line));
+                        }
+                    }
+                }
+            }
+        }
+        let closure = hit as f64 / total.max(1) as f64;
+        if hit == total && total > 0 {
+            closed.0 += area[i];
+            closed.1 += area[i] * sums[i];
+            closed.2 += 1;
+            closed.3 += area[i] * sums[i].min(1.0);
+            if sums[i] < 0.99 && low_closed < 12 {
+                low_closed += 1;
+                println!(
+                    "closed but low: sum {:.4} scale {:.3} area {:.2e} terminal {} at {:.1?} n {:.2?} line {:?}",
+                    sums[i],
+                    h.link_scale()[i],
+                    area[i],
+                    in_terminal[i],
+                    e.centroid,
+                    e.normal,
+                    hier.scene.polygons[e.patch as usize].loc.as_ref().and_then(|l| l.line)
+                );
+            }
+        }
+        let bin = (closure * 4.0).min(3.0) as usize;
+        *area_of.entry((in_terminal[i], bin)).or_default() += area[i];
+        let g = groups.entry((in_terminal[i], bin)).or_default();
+        g.0 += area[i] * sums[i];
+        g.1 += area[i] * closure;
+        g.2 += 1;
+    }
+    println!("closure rays: {} missed everything, {} met a back face", outcome[0], outcome[1]);
+    println!(
+        "closed elements (every ray met a front face): {}, area-weighted raw row sum {:.4}, capped at 1: {:.4}",
+        closed.2,
+        closed.1 / closed.0.max(1e-300),
+        closed.3 / closed.0.max(1e-300)
+    );
+    for ((term, bin), (s, c, n)) in &groups {
+        println!(
+            "terminal {term:5} closure in [{:.2}, {:.2}]: {n:5} elements, raw sum / closure {:.3}",
+            *bin as f64 / 4.0,
+            (*bin as f64 + 1.0) / 4.0,
+            s / c.max(1e-300)
+        );
+        let a: f64 = area_of.get(&(*term, *bin)).copied().unwrap_or(0.0);
+        println!("    area-weighted mean closure {:.4}, mean raw sum {:.4}", c / a.max(1e-300), s / a.max(1e-300));
+    }
+    let bins = [0.0, 0.5, 0.8, 0.9, 0.95, 0.99, 1.01, 1.05, 1.1, 1.2, 1.5, 2.0, f64::INFINITY];
+    for (name, sel) in [("all open", None), ("in terminal clusters", Some(true)), ("elsewhere", Some(false))] {
+        let mut hist = vec![0.0; bins.len() - 1];
+        let (mut tot, mut wsum, mut clipped) = (0.0, 0.0, 0.0);
+        for i in 0..h.len() {
+            if area[i] <= 0.0 || sel.is_some_and(|s| s != in_terminal[i]) {
+                continue;
+            }
+            let s = sums[i];
+            let b = bins.windows(2).position(|w| s >= w[0] && s < w[1]).unwrap_or(0);
+            hist[b] += area[i];
+            tot += area[i];
+            wsum += area[i] * s;
+            clipped += area[i] * s.min(1.0);
+        }
+        println!("{name}: area {tot:.4e}, mean raw sum {:.4}, after the guard {:.4}", wsum / tot, clipped / tot);
+        for (k, a) in hist.iter().enumerate() {
+            println!("   [{:>4}, {:>4}): {:6.2} %", bins[k], bins[k + 1], 100.0 * a / tot);
+        }
+    }
+}
+
+/// Issue 10, "done means" 3: the conference room's geometry (two-sided, ρ = 0.5, Ke = 1)
+/// inside a closed furnace room, on the hierarchical operator with clusters: every element
+/// that is wholly open (nothing covers any of it) must read the exact B = E/(1 − ρ).
+/// `DIAG=1` prints the error quantiles with row sums and the worst elements, `CHAIN=1` the
+/// worst element's nodes from the root with their links.
+///
+/// Not met yet. Measured 2026-12-02 (624 014 elements, 4.8 M links, 63 s): 175 312 of
+/// 394 796 open elements over 1 %, median −0.77 %, 10 % below −19 %; escaped 2.5 % of the
+/// light of a closed room. The worst read B = E (no link at all): back faces 0.14 from a
+/// parallel face (a window frame), in contact in all but name, and elements of cluster
+/// receivers whose normal faces away from most of their links, where the quadratic
+/// clamped-cosine fit goes negative and is clamped to zero.
+#[test]
+#[ignore]
+fn conference_furnace_with_clusters() {
+    let Some(path) = common::shared("scenes/conference/conference.obj") else {
+        return;
+    };
+    let mut d = radiosity::scene::load(path.to_str().unwrap()).unwrap();
+    for m in &mut d.materials {
+        m.reflectance = Rgb::splat(0.5);
+        m.emission = Rgb::ONE;
+    }
+    d.two_sided = true;
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for p in &d.polygons {
+        for x in &p.vertices {
+            lo = lo.min(*x);
+            hi = hi.max(*x);
+        }
+    }
+    let pad = (hi - lo) * 0.25;
+    let obj = d.objects.len() as u32;
+    d.objects.push(ObjectDesc { name: "furnace-room".into(), loc: None });
+    for f in box_faces(lo - pad, hi + pad, true) {
+        d.polygons.push(PolygonDesc { vertices: f, material: 0, object: obj, loc: None });
+    }
+    d.camera = None;
+    let scene = Scene::from_desc(d).unwrap();
+    let mut s = hierarchical();
+    s.solve.tolerance = 1e-7;
+    let t = std::time::Instant::now();
+    let solved = solve_scene(scene, &s, &NoProgress).unwrap();
+    let h = solved.transport.as_ref().unwrap().hierarchy().unwrap();
+    let exact = std::f64::consts::PI * 2.0;
+    let open = &solved.receivers.open_fraction;
+    let errs: Vec<f64> = solved
+        .solution
+        .radiosity
+        .iter()
+        .zip(open)
+        .filter(|(_, &o)| o >= 1.0)
+        .map(|(b, _)| (b.max_element() / exact - 1.0).abs().max((b.min_element() / exact - 1.0).abs()))
+        .collect();
+    let over = errs.iter().filter(|&&e| e > 0.01).count();
+    let worst = errs.iter().copied().fold(0.0, f64::max);
+    if std::env::var("DIAG").is_ok() {
+        let sums = h.row_sums();
+        let mut signed: Vec<(f64, f64, f64, usize)> = solved
+            .solution
+            .radiosity
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| open[*i] >= 1.0)
+            .map(|(i, b)| (b.y / exact - 1.0, sums[i], solved.mesh.elements[i].area, i))
+            .collect();
+        signed.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for q in [0.0, 0.01, 0.05, 0.1, 0.25, 0.5, 0.75, 0.9, 0.99, 1.0] {
+            let k = ((signed.len() - 1) as f64 * q) as usize;
+            println!(
+                "q{q}: err {:+.4} rowsum {:.4} area {:.3e} element {}",
+                signed[k].0, signed[k].1, signed[k].2, signed[k].3
+            );
+        }
+        for s in signed.iter().take(8) {
+            let e = &solved.mesh.elements[s.3];
+            let poly = &solved.scene.polygons[e.patch as usize];
+            println!(
+                "worst: err {:+.4} sum {:.4} area {:.3e} at {:.1?} n {:.2?} polygon {:?} back {}",
+                s.0, s.1, s.2, e.centroid, e.normal, poly.loc, poly.back_side
+            );
+        }
+        if std::env::var("CHAIN").is_ok() {
+            let leaf = h.tree.leaf_of[signed[0].3];
+            let mut k = 0u32;
+            loop {
+                let nd = &h.tree.nodes[k as usize];
+                let (cnt, f) = h.links(k).fold((0, 0.0f64), |(c, f), (_, x)| (c + 1, f + x as f64));
+                println!(
+                    "node {k} depth {} surface {} size {:.1} area {:.1} count {} links {cnt} f {f:.4} n {:.2?}",
+                    nd.depth,
+                    nd.surface,
+                    nd.size(),
+                    nd.area,
+                    nd.count,
+                    nd.normal()
+                );
+                if k == leaf || nd.is_leaf() {
+                    break;
+                }
+                k = *nd.child.iter().find(|&&c| h.tree.contains(c, leaf)).unwrap();
+            }
+        }
+        let low_sum = signed.iter().filter(|s| s.1 < 0.99).count();
+        let low_area: f64 =
+            signed.iter().filter(|s| s.1 < 0.99).map(|s| s.2).sum::<f64>() / signed.iter().map(|s| s.2).sum::<f64>();
+        println!("low-sum area share {:.4}", low_area);
+        println!("{low_sum} open elements with row sum < 0.99");
+    }
+    println!(
+        "{} elements, {} links, {:.1} s: {over} of {} open elements over 1 %, worst {:.3} %",
+        solved.mesh.len(),
+        h.stats.links,
+        t.elapsed().as_secs_f64(),
+        errs.len(),
+        100.0 * worst
+    );
+    assert!(over == 0, "{over} of {} open elements over 1 %, worst {:.3} %", errs.len(), 100.0 * worst);
 }

@@ -31,6 +31,10 @@ pub const PROBES: u32 = 8;
 /// Largest receiver grid (k × k points).
 pub const MAX_K: usize = 3;
 
+/// Elements with `√area` below this fraction of the scene's diagonal are not probed on the
+/// fine grid (their open cells follow the 3 × 3 points).
+pub const FINE_SIZE: f64 = 1.0 / 200.0;
+
 /// Grid used to measure the open fraction of elements that a contact edge crosses.
 pub const FINE_K: usize = 8;
 const _: () = assert!(FINE_K * FINE_K == 64, "open cells are one u64 per element");
@@ -114,28 +118,59 @@ impl Receivers {
 
     /// Receivers with the coverage test.
     pub fn compute(scene: &Scene, mesh: &Mesh, rays: &SceneRays) -> Receivers {
+        Self::compute_with(scene, mesh, rays, &crate::NoProgress)
+    }
+
+    /// [`Receivers::compute`] reporting progress (stage "coverage"; the elements left are
+    /// skipped once `progress` asks to stop, and the caller is expected to check it).
+    pub fn compute_with(scene: &Scene, mesh: &Mesh, rays: &SceneRays, progress: &dyn crate::Progress) -> Receivers {
         let diag = scene.diagonal().max(f64::MIN_POSITIVE);
-        let res: Vec<([Vec<DVec3>; MAX_K], f64, u64)> = mesh
+        progress.begin("coverage", mesh.len() as u64);
+        let done = std::sync::atomic::AtomicU64::new(0);
+        let res: Vec<([Vec<DVec3>; MAX_K], f64, u64, u64)> = mesh
             .elements
             .par_iter()
             .with_min_len(16)
             .map(|e| {
+                if done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) % 1024 == 1023 {
+                    progress.advance(1024);
+                }
+                if progress.should_stop() {
+                    return (Default::default(), 1.0, u64::MAX, 0);
+                }
                 let mut lv: [Vec<DVec3>; MAX_K] = Default::default();
-                let mut open3 = 0usize;
-                let mut n3 = 0usize;
-                for k in 1..=MAX_K {
-                    for p in grid(e, &mesh.positions, k) {
-                        let open = !covered(p, e.normal, e.patch, scene, rays, diag);
-                        if k == MAX_K {
-                            n3 += 1;
-                            if open {
-                                open3 += 1;
-                            }
-                        }
-                        if open {
-                            lv[k - 1].push(p);
-                        }
+                let mut cast = 0u64;
+                // The 3 × 3 grid first: its centre is the k = 1 point, and where all nine
+                // agree (and, when open, the corners too) the 2 × 2 points take their
+                // verdict without probes of their own (an element that no contact edge
+                // crosses is wholly open or wholly covered).
+                let g3 = grid(e, &mesh.positions, MAX_K);
+                let open: Vec<bool> =
+                    g3.iter().map(|&p| !covered(p, e.normal, e.patch, scene, rays, diag, &mut cast)).collect();
+                let n3 = g3.len();
+                let open3 = open.iter().filter(|&&o| o).count();
+                for (p, &o) in g3.iter().zip(&open) {
+                    if o {
+                        lv[MAX_K - 1].push(*p);
                     }
+                }
+                if open[n3 / 2] {
+                    lv[0].push(g3[n3 / 2]);
+                }
+                // A contact edge can cross a corner without touching the 3×3 points: probe
+                // the corners too (pulled 2 % towards the centroid).
+                let (corners, nc) = e.corners(&mesh.positions);
+                let corner_covered = open3 == n3
+                    && corners[..nc].iter().any(|c| {
+                        covered(*c + (e.centroid - *c) * 0.02, e.normal, e.patch, scene, rays, diag, &mut cast)
+                    });
+                if open3 == n3 && !corner_covered {
+                    lv[1] = grid(e, &mesh.positions, 2);
+                } else if open3 > 0 {
+                    lv[1] = grid(e, &mesh.positions, 2)
+                        .into_iter()
+                        .filter(|&p| !covered(p, e.normal, e.patch, scene, rays, diag, &mut cast))
+                        .collect();
                 }
                 // A mixed 3×3 result means a contact edge crosses the element: estimate the
                 // open fraction on a finer grid (reciprocity depends on it).
@@ -143,39 +178,44 @@ impl Receivers {
                 // finest receiver set becomes the open points of that grid too.
                 let open3_pts = lv[MAX_K - 1].clone();
                 let mut frac = open3 as f64 / n3 as f64;
-                // A contact edge can cross a corner without touching the 3×3 points: probe
-                // the corners too (pulled 2 % towards the centroid).
-                let (corners, nc) = e.corners(&mesh.positions);
-                let corner_covered = open3 == n3
-                    && corners[..nc].iter().any(|c| covered(*c + (e.centroid - *c) * 0.02, e.normal, e.patch, scene, rays, diag));
                 let mut cells = if open3 == 0 { 0 } else { u64::MAX };
-                if open3 > 0 && (open3 < n3 || corner_covered) {
+                // Elements small beside the scene (below `FINE_SIZE` of its diagonal: the
+                // parts of furniture, not the floor they stand on) keep the 3 × 3 verdict:
+                // the fine grid's 64 points would cost most of the probes on a large model
+                // for a share of the scene's area that the 3 × 3 grid resolves well enough.
+                let fine_grid = e.area.sqrt() >= FINE_SIZE * diag;
+                let mut fine_open = Vec::new();
+                if open3 > 0 && (open3 < n3 || corner_covered) && fine_grid {
                     let fine = grid(e, &mesh.positions, FINE_K);
                     let mut mask = 0u64;
-                    let mut open = Vec::new();
                     for (b, p) in fine.iter().enumerate() {
-                        if !covered(*p, e.normal, e.patch, scene, rays, diag) {
+                        if !covered(*p, e.normal, e.patch, scene, rays, diag, &mut cast) {
                             mask |= 1 << b;
-                            open.push(*p);
+                            fine_open.push(*p);
                         }
                     }
-                    if !open.is_empty() {
-                        lv[MAX_K - 1] = open;
+                    if !fine_open.is_empty() {
+                        lv[MAX_K - 1] = std::mem::take(&mut fine_open);
                         cells = mask;
                         if mask == u64::MAX {
                             frac = 1.0;
                         }
                     } else {
                         // The fine grid found nothing open (a sliver around a 3 × 3
-                        // point): the fine cells whose centres lie in an open 3 × 3 cell.
+                        // point): the 3 × 3 verdict below.
                         cells = 0;
-                        let coarse = grid(e, &mesh.positions, MAX_K);
-                        for b in 0..FINE_K * FINE_K {
-                            let (u, v) = (((b % FINE_K) as f64 + 0.5) / FINE_K as f64, ((b / FINE_K) as f64 + 0.5) / FINE_K as f64);
-                            let k = ((v * MAX_K as f64) as usize).min(MAX_K - 1) * MAX_K + ((u * MAX_K as f64) as usize).min(MAX_K - 1);
-                            if open3_pts.iter().any(|p| (*p - coarse[k]).length_squared() == 0.0) {
-                                cells |= 1 << b;
-                            }
+                    }
+                }
+                if open3 > 0 && open3 < n3 && cells != u64::MAX && (cells == 0 || !fine_grid) {
+                    // The fine cells whose centres lie in an open 3 × 3 cell.
+                    cells = 0;
+                    for b in 0..FINE_K * FINE_K {
+                        let (u, v) =
+                            (((b % FINE_K) as f64 + 0.5) / FINE_K as f64, ((b / FINE_K) as f64 + 0.5) / FINE_K as f64);
+                        let k = ((v * MAX_K as f64) as usize).min(MAX_K - 1) * MAX_K
+                            + ((u * MAX_K as f64) as usize).min(MAX_K - 1);
+                        if open[k] {
+                            cells |= 1 << b;
                         }
                     }
                 }
@@ -216,19 +256,20 @@ impl Receivers {
                     let a: f64 = open_polygons(e, &mesh.positions, cells).iter().map(|q| 0.5 * newell_normal(q).length()).sum();
                     frac = (a / e.area).clamp(0.0, 1.0);
                 }
-                (lv, frac, cells)
+                (lv, frac, cells, cast)
             })
             .collect();
+        progress.end();
         let mut points = Vec::with_capacity(res.len());
         let mut open_fraction = Vec::with_capacity(res.len());
         let mut open_cells = Vec::with_capacity(res.len());
-        for (p, f, c) in res {
+        let mut rays = 0;
+        for (p, f, c, r) in res {
+            rays += r;
             points.push(p);
             open_fraction.push(f);
             open_cells.push(c);
         }
-        let mixed = open_fraction.iter().filter(|f| **f > 0.0 && **f < 1.0).count() as u64;
-        let rays = PROBES as u64 * ((1 + 4 + 9 + 4) * mesh.len() as u64 + (FINE_K * FINE_K) as u64 * mixed);
         Receivers { points, open_fraction, open_cells, rays }
     }
 }
@@ -307,13 +348,14 @@ fn grid(e: &super::Element, positions: &[DVec3], k: usize) -> Vec<DVec3> {
 }
 
 /// True when every probe ray from `p` hits a back face first.
-fn covered(p: DVec3, n: DVec3, patch: u32, scene: &Scene, rays: &SceneRays, diag: f64) -> bool {
+fn covered(p: DVec3, n: DVec3, patch: u32, scene: &Scene, rays: &SceneRays, diag: f64, cast: &mut u64) -> bool {
     let (t, b) = basis(n);
     let origin = (p + n * (1e-7 * diag)).as_vec3();
     for s in 0..PROBES {
         let (u1, u2) = halton2(s, (0.5 / PROBES as f64, 0.25));
         let d = cosine_hemisphere(u1, u2);
         let dir = t * d.x + b * d.y + n * d.z;
+        *cast += 1;
         // A hit "from behind" is the back of a one-sided surface, or the generated back
         // copy of a two-sided one (behind its input winding's front): inside a two-sided box
         // counts as inside, as for a one-sided one.
