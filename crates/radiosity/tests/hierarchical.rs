@@ -357,7 +357,9 @@ fn operator_against_rows() {
 /// Diagnostic, run by hand: raw row sums of the hierarchical operator on a real model
 /// (`MODEL`, a path under ../shared; `TWO=1`, `SEP`, `MIN`, `EMIT=1` as in
 /// `operator_against_rows`), area-weighted, by kind of receiver: in a closed model they
-/// should be 1.
+/// should be 1. Also the row sums of the sampled elements that every one of 144 test rays
+/// shows closed, and what the rays that are no front-face hits met (`MISSES=1` prints
+/// some; `OFF` sets the rays' start above the surface, in diagonals, default 1e-6).
 #[test]
 #[ignore]
 fn hierarchy_row_sums() {
