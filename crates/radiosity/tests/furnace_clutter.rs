@@ -339,31 +339,10 @@ furnace_tests! {
     furnace_t_junctions_adaptive: "t-junction", Method::Adaptive;
 }
 
-/// A real model's geometry inside a closed two-sided furnace room: every material grey
-/// ρ = 0.5 with Ke = 1, the room 50 % larger than the model's bounds.
+/// A real model's geometry inside a closed furnace room, the room two-sided like the model
+/// (see [`common::model_in_furnace`]).
 fn model_in_furnace(rel: &str) -> Option<Scene> {
-    let path = common::shared(rel)?;
-    let mut d = radiosity::scene::load(path.to_str().unwrap()).unwrap();
-    for m in &mut d.materials {
-        m.reflectance = Rgb::splat(0.5);
-        m.emission = Rgb::ONE;
-    }
-    d.two_sided = true;
-    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-    for p in &d.polygons {
-        for x in &p.vertices {
-            lo = lo.min(*x);
-            hi = hi.max(*x);
-        }
-    }
-    let pad = (hi - lo) * 0.25;
-    let obj = d.objects.len() as u32;
-    d.objects.push(ObjectDesc { name: "furnace-room".into(), loc: None });
-    for f in box_faces(lo - pad, hi + pad, true) {
-        d.polygons.push(PolygonDesc { vertices: f, material: 0, object: obj, loc: None });
-    }
-    d.camera = None;
-    Some(Scene::from_desc(d).unwrap())
+    common::model_in_furnace(rel, false)
 }
 
 macro_rules! model_furnace_tests {

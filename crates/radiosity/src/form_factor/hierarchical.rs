@@ -337,28 +337,12 @@ pub fn link(
     let total_rays = AtomicU64::new(0);
     let direct_rows = match &ctx.direct {
         Some(em) => {
-            progress.begin("direct light", n as u64);
-            let rows: Vec<Vec<(u32, f32)>> = (0..n as u32)
-                .into_par_iter()
-                .with_min_len(64)
-                .map(|i| {
-                    if i % 1024 == 1023 {
-                        progress.advance(1024);
-                    }
-                    if stopped.load(Ordering::Relaxed) || progress.should_stop() {
-                        stopped.store(true, Ordering::Relaxed);
-                        return Vec::new();
-                    }
-                    let mut c = Counts::default();
-                    let row = ctx.direct_row(i, em, &mut c);
-                    total_rays.fetch_add(c.rays, Ordering::Relaxed);
-                    row
-                })
-                .collect();
-            progress.end();
-            if stopped.load(Ordering::Relaxed) {
-                return Err(Error::Cancelled);
-            }
+            let rows = per_element(n, "direct light", progress, &stopped, Vec::new(), |i| {
+                let mut c = Counts::default();
+                let row = ctx.direct_row(i, em, &mut c);
+                total_rays.fetch_add(c.rays, Ordering::Relaxed);
+                row
+            })?;
             Some(crate::transport::SparseRows::from_rows(rows))
         }
         None => None,
@@ -398,27 +382,11 @@ pub fn link(
         return Err(Error::Cancelled);
     }
     let closure = if opts.closure_rays > 0 {
-        progress.begin("closure", n as u64);
-        let c: Vec<f32> = (0..n as u32)
-            .into_par_iter()
-            .with_min_len(64)
-            .map(|i| {
-                if i % 1024 == 1023 {
-                    progress.advance(1024);
-                }
-                if stopped.load(Ordering::Relaxed) || progress.should_stop() {
-                    stopped.store(true, Ordering::Relaxed);
-                    return f32::NAN;
-                }
-                let (c, rays) = ctx.closure(i);
-                total_rays.fetch_add(rays, Ordering::Relaxed);
-                c
-            })
-            .collect();
-        progress.end();
-        if stopped.load(Ordering::Relaxed) {
-            return Err(Error::Cancelled);
-        }
+        let c = per_element(n, "closure", progress, &stopped, f32::NAN, |i| {
+            let (c, rays) = ctx.closure(i);
+            total_rays.fetch_add(rays, Ordering::Relaxed);
+            c
+        })?;
         // Groups: the nodes that are not split (at the minimum size), or that hold at most
         // CLOSURE_GROUP elements: a few hundred rays each, where one element's 16 cannot
         // tell a row sum of 0.9 from 1.
@@ -1012,6 +980,38 @@ impl Ctx<'_> {
         }
         total / pts.len() as f64
     }
+}
+
+/// `f(i)` for every element `i` in parallel, as the progress stage `stage`; stops early on
+/// Ctrl-C (`stopped` is set, the rest get `skipped`) and then returns `Cancelled`.
+fn per_element<T: Send + Sync + Clone>(
+    n: usize,
+    stage: &str,
+    progress: &dyn Progress,
+    stopped: &AtomicBool,
+    skipped: T,
+    f: impl Fn(u32) -> T + Sync + Send,
+) -> Result<Vec<T>> {
+    progress.begin(stage, n as u64);
+    let out: Vec<T> = (0..n as u32)
+        .into_par_iter()
+        .with_min_len(64)
+        .map(|i| {
+            if i % 1024 == 1023 {
+                progress.advance(1024);
+            }
+            if stopped.load(Ordering::Relaxed) || progress.should_stop() {
+                stopped.store(true, Ordering::Relaxed);
+                return skipped.clone();
+            }
+            f(i)
+        })
+        .collect();
+    progress.end();
+    if stopped.load(Ordering::Relaxed) {
+        return Err(Error::Cancelled);
+    }
+    Ok(out)
 }
 
 /// `Σ_leaves A · CLAMPED_COS(n·d)` over node `nr`: what its leaves take in all, per unit of

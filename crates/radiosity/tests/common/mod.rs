@@ -50,3 +50,42 @@ pub fn box_faces(lo: DVec3, hi: DVec3, inward: bool) -> Vec<Vec<DVec3>> {
         })
         .collect()
 }
+
+/// A real model's geometry (`rel` under ../shared; `None` without it) inside a closed
+/// furnace room 50 % larger than its bounds: every material grey ρ = 0.5 with Ke = 1, the
+/// model two-sided. `one_sided_room`: the room's walls face inward only (else they are
+/// two-sided too, and their outer sides face the void, where B = E exactly).
+pub fn model_in_furnace(rel: &str, one_sided_room: bool) -> Option<Scene> {
+    let path = shared(rel)?;
+    let mut d = radiosity::scene::load(path.to_str().unwrap()).unwrap();
+    for m in &mut d.materials {
+        m.reflectance = Rgb::splat(0.5);
+        m.emission = Rgb::ONE;
+    }
+    d.two_sided = true;
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for p in &d.polygons {
+        for x in &p.vertices {
+            lo = lo.min(*x);
+            hi = hi.max(*x);
+        }
+    }
+    let pad = (hi - lo) * 0.25;
+    let obj = d.objects.len() as u32;
+    d.objects.push(ObjectDesc { name: "furnace-room".into(), loc: None });
+    let material = if one_sided_room {
+        d.materials.push(MaterialDesc {
+            emission: Rgb::ONE,
+            two_sided: Some(false),
+            ..MaterialDesc::diffuse("furnace-room", Rgb::splat(0.5))
+        });
+        d.materials.len() as u32 - 1
+    } else {
+        0
+    };
+    for f in box_faces(lo - pad, hi + pad, true) {
+        d.polygons.push(PolygonDesc { vertices: f, material, object: obj, loc: None });
+    }
+    d.camera = None;
+    Some(Scene::from_desc(d).unwrap())
+}
