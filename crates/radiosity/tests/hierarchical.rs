@@ -267,9 +267,15 @@ fn final_gather_on_the_hierarchy_matches_rows() {
 
 /// Diagnostic, run by hand: the hierarchical operator against explicit rows on one mesh of
 /// a real model. `MODEL` (default the classroom), `TWO=1` (two-sided), `SEP`, `MIN` (link
-/// minimum size; default the mesh size), `EMIT=1` (emitters in the links). Prints the
-/// area-weighted bias and spread of `H·x` against `F·x` for x = 1 (row sums) and for the
-/// rows' solution without emission (the indirect light), by kind of receiver.
+/// minimum size; default the mesh size), `EMIT=1` (emitters in the links), `CLOSURE=N`
+/// (closure rays, 0: no fit), `NOCR=1` (no cluster receivers). Prints the area-weighted
+/// bias and spread of `H·x` against `F·x` for x = 1 (row sums) and for the rows' solution
+/// without emission (the indirect light), by kind of receiver. `WORST=1` adds the twelve
+/// elements that differ most and the bias by the rows' own row sum; `COLS=1` the share of
+/// each (object, side)'s power that its receivers get (column sums: above one is light
+/// created), `OBJ=k` with it where object k's light goes; `EL=i` every ancestor's links of
+/// element i against the rows' factors to the same sources (`ALL=1 NODE=k`: each link of
+/// node k).
 #[test]
 #[ignore]
 fn operator_against_rows() {
@@ -292,6 +298,12 @@ fn operator_against_rows() {
     }
     hs.links.min_size = env("MIN");
     hs.links.direct_columns = std::env::var("EMIT").is_err();
+    if let Some(x) = env("CLOSURE") {
+        hs.links.closure_rays = x as usize;
+    }
+    if std::env::var("NOCR").is_ok() {
+        hs.links.cluster_receivers = false;
+    }
     hs.solve.max_iterations = 1;
     let t = std::time::Instant::now();
     let hier = solve_scene(scene, &hs, &NoProgress).unwrap();
@@ -333,6 +345,115 @@ fn operator_against_rows() {
             "large surface"
         }
     };
+    if std::env::var("COLS").is_ok() {
+        // Column sums per (object, side): the fraction of the power leaving a group that
+        // its receivers get, rows against hierarchy, for the groups with the most
+        // indirect power.
+        let mut groups: std::collections::HashMap<(u32, bool), (f64, f64, Vec<usize>)> = Default::default();
+        for i in 0..n {
+            let p = &rows.scene.polygons[rows.mesh.elements[i].patch as usize];
+            let g = groups.entry((p.object, p.back_side)).or_default();
+            g.0 += area[i];
+            g.1 += area[i] * radiosity::luminance(indirect[i]);
+            g.2.push(i);
+        }
+        let mut list: Vec<_> = groups.into_iter().collect();
+        list.sort_by(|a, b| b.1 .1.total_cmp(&a.1 .1));
+        let top = list.len().min(60);
+        let (mut er, mut eh) = (0.0, 0.0);
+        for chunk in list[..top].chunks(3) {
+            let mut x = vec![Rgb::ZERO; n];
+            for (c, g) in chunk.iter().enumerate() {
+                for &i in &g.1 .2 {
+                    x[i][c] = 1.0;
+                }
+            }
+            let mut yr = vec![Rgb::ZERO; n];
+            let mut yh = vec![Rgb::ZERO; n];
+            f.gather(&x, &mut yr);
+            h.gather(&x, &mut yh);
+            for (c, g) in chunk.iter().enumerate() {
+                let outr: f64 = (0..n).map(|i| area[i] * yr[i][c]).sum::<f64>() / g.1 .0;
+                let outh: f64 = (0..n).map(|i| area[i] * yh[i][c]).sum::<f64>() / g.1 .0;
+                let pw = g.1 .1;
+                er += outr * pw;
+                eh += outh * pw;
+                println!(
+                    "    object {:>4} {} ({}): area {:.3} indirect power {:.2}  out rows {:.4} hier {:.4}  excess power {:+.3}",
+                    g.0 .0,
+                    if g.0 .1 { "back " } else { "front" },
+                    rows.scene.objects[g.0 .0 as usize].name,
+                    g.1 .0,
+                    pw,
+                    outr,
+                    outh,
+                    (outh - outr) * pw
+                );
+            }
+        }
+        println!("  top {top} groups: power passed on rows {er:.2}, hierarchy {eh:.2}");
+        if let Some(o) = env("OBJ") {
+            let x: Vec<Rgb> = (0..n)
+                .map(|i| {
+                    let p = &rows.scene.polygons[rows.mesh.elements[i].patch as usize];
+                    if p.object == o as u32 && !p.back_side { Rgb::ONE } else { Rgb::ZERO }
+                })
+                .collect();
+            let mut yr = vec![Rgb::ZERO; n];
+            let mut yh = vec![Rgb::ZERO; n];
+            f.gather(&x, &mut yr);
+            h.gather(&x, &mut yh);
+            let mut per: std::collections::HashMap<(u32, bool), (f64, f64, f64)> = Default::default();
+            for i in 0..n {
+                let p = &rows.scene.polygons[rows.mesh.elements[i].patch as usize];
+                let g = per.entry((p.object, p.back_side)).or_default();
+                g.0 += area[i] * yr[i].x;
+                g.1 += area[i] * yh[i].x;
+                g.2 += area[i];
+            }
+            let mut v: Vec<_> = per.into_iter().collect();
+            v.sort_by(|a, b| (b.1 .1 - b.1 .0).abs().total_cmp(&(a.1 .1 - a.1 .0).abs()));
+            for ((obj, back), (r, q, a)) in v.iter().take(15) {
+                println!("      to {obj:>4} {} area {a:.3}: rows {r:.4} hier {q:.4} ({:+.4})", if *back { "back " } else { "front" }, q - r);
+            }
+        }
+
+    }
+    if let Some(el) = env("EL") {
+        let el = el as usize;
+        let leaf = h.tree.leaf_of[el];
+        let ne = rows.mesh.elements[el].normal;
+        println!("element {el}: normal {:.3?} centroid {:.3?} rows sum {:.4} link scale {}", ne.to_array(), rows.mesh.elements[el].centroid.to_array(), f.row_sums()[el], h.link_scale()[el]);
+        let mut k = 0u32;
+        let mut tot = 0.0;
+        loop {
+            let nd = h.tree.nodes[k as usize];
+            let mut sum = 0.0;
+            let mut cnt = 0;
+            let (cols, vals) = f.rows().unwrap().row(el);
+            let mut rsum = 0.0;
+            for (src, fl, v, _) in h.links_full(k) {
+                let c = if nd.surface { 1.0 } else { glam::DVec3::from_array(v.map(|x| x as f64)).dot(ne).max(0.0) };
+                sum += fl as f64 * c;
+                cnt += 1;
+                let rf: f64 = cols.iter().zip(vals).filter(|(&j, _)| h.tree.contains(src, h.tree.leaf_of[j as usize])).map(|(_, &v)| v as f64).sum();
+                rsum += rf;
+                if std::env::var("ALL").is_ok() && env("NODE") == Some(k as f64) {
+                    let sn = h.tree.nodes[src as usize];
+                    println!("        from {src} ({} count {} size {:.2} c {:.2?}) f {fl:.4} v {v:.2?} → {:.4} rows {rf:.4}", if sn.surface { "surface" } else { "cluster" }, sn.count, sn.size(), sn.centroid.to_array(), fl as f64 * c);
+                }
+            }
+            tot += sum;
+            println!("    node {k} depth {} {} count {} size {:.2}: {cnt} links, sum {sum:.4} (rows over the same sources {rsum:.4})", nd.depth, if nd.surface { "surface" } else { "cluster" }, nd.count, nd.size());
+            if k == leaf {
+                break;
+            }
+            let c = nd.child;
+            k = if h.tree.contains(c[0], leaf) { c[0] } else { c[1] };
+        }
+        let direct = h.direct().map_or(0.0, |d| d.row_sum(el));
+        println!("  links {tot:.4} + direct {direct:.4}");
+    }
     for (name, x) in [("row sums (x = 1)", vec![Rgb::ONE; n]), ("indirect (rows' B − E)", indirect)] {
         let mut yr = vec![Rgb::ZERO; n];
         let mut yh = vec![Rgb::ZERO; n];
@@ -351,6 +472,41 @@ fn operator_against_rows() {
             g.1 += area[i] * (q - r);
             g.2 += area[i] * (q - r).abs();
             g.3 += 1;
+        }
+        if std::env::var("WORST").is_ok() {
+            let mut w: Vec<(f64, usize)> = (0..n)
+                .map(|i| (area[i] * (radiosity::luminance(yh[i]) - radiosity::luminance(yr[i])), i))
+                .collect();
+            w.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
+            let mut buckets = [(0.0f64, 0.0f64, 0usize); 5];
+            let rsums = f.row_sums();
+            for i in 0..n {
+                let r = radiosity::luminance(yr[i]);
+                let q = radiosity::luminance(yh[i]);
+                let rs = rsums[i];
+                let b = if rs < 0.05 { 0 } else if rs < 0.5 { 1 } else if rs < 0.9 { 2 } else if rs < 0.99 { 3 } else { 4 };
+                buckets[b].0 += area[i] * r;
+                buckets[b].1 += area[i] * (q - r);
+                buckets[b].2 += 1;
+            }
+            for (b, name) in buckets.iter().zip(["rows' sum <0.05", "<0.5", "<0.9", "<0.99", ">=0.99"]) {
+                println!("    {name:>16}: {:>6} elements, rows {:.3}, Δ {:+.3} (of all {:.3})", b.2, b.0, b.1, 0.0);
+            }
+            for &(d, i) in w.iter().take(12) {
+                let e = &rows.mesh.elements[i];
+                println!(
+                    "    el {i} area {:.4} rows {:.4} hier {:.4} (Δ·A {:+.4}) patch {} n {:.2?} c {:.2?} scale {:.3} {}",
+                    area[i],
+                    radiosity::luminance(yr[i]),
+                    radiosity::luminance(yh[i]),
+                    d,
+                    e.patch,
+                    e.normal.to_array(),
+                    e.centroid.to_array(),
+                    h.link_scale()[i],
+                    kind(i)
+                );
+            }
         }
         println!("{name}:");
         for (k, (tot, bias, l1, c)) in groups {
@@ -578,7 +734,8 @@ fn conference_furnace_with_clusters() {
         }
         if std::env::var("CHAIN").is_ok() {
             // The largest open element whose row falls short.
-            let pick = signed.iter().filter(|s| s.1 < 0.99).max_by(|a, b| a.2.total_cmp(&b.2)).unwrap_or(&signed[0]);
+            let limit = if std::env::var("ZERO").is_ok() { 1e-6 } else { 0.99 };
+            let pick = signed.iter().filter(|s| s.1 < limit).max_by(|a, b| a.2.total_cmp(&b.2)).unwrap_or(&signed[0]);
             let e = &solved.mesh.elements[pick.3];
             println!("chain of element {} (err {:+.4}, sum {:.4}, area {:.3e}) at {:.1?} n {:.2?}", pick.3, pick.0, pick.1, pick.2, e.centroid, e.normal);
             let leaf = h.tree.leaf_of[pick.3];
@@ -586,6 +743,12 @@ fn conference_furnace_with_clusters() {
             loop {
                 let nd = &h.tree.nodes[k as usize];
                 let (cnt, f) = h.links(k).fold((0, 0.0f64), |(c, f), (_, x)| (c + 1, f + x as f64));
+                if std::env::var("ZERO").is_ok() {
+                    for (src, fl, v, _) in h.links_full(k).take(6) {
+                        let sn = &h.tree.nodes[src as usize];
+                        println!("    from {src} surface {} count {} c {:.1?} f {fl:.4} v {v:.2?}", sn.surface, sn.count, sn.centroid);
+                    }
+                }
                 println!(
                     "node {k} depth {} surface {} size {:.1} area {:.1} count {} links {cnt} f {f:.4} n {:.2?}",
                     nd.depth,

@@ -31,7 +31,9 @@
 //! - a cluster's radiosity is read as seen from the receiver
 //!   ([`crate::transport::hierarchical::Link::directional`]); clusters whose elements emit
 //!   unequally (a lamp and its housing) are never sources;
-//! - a cluster receiver takes links from sources that emit nothing, as irradiance per unit
+//! - a cluster receiver takes links from sources that emit nothing, only when they are
+//!   fully visible or fully hidden (a partly visible pair is split whatever its power: the
+//!   cluster's parts may hide each other), as irradiance per unit
 //!   cosine from one direction, spread to its elements by their normals
 //!   ([`crate::transport::hierarchical::CLAMPED_COS`]); light from concentrated emitters
 //!   (emitting elements on under a quarter of the area) always reaches surface nodes
@@ -709,8 +711,14 @@ impl Ctx<'_> {
                 return;
             }
             let power = k * nr.projected_area(d) * self.b_hat[s as usize] as f64 * self.rho[r as usize] as f64;
+            // Partly visible: always split, whatever the power (unlike a surface receiver).
+            // The visible fraction is an average over the cluster's front faces, and one
+            // part of a cluster often hides another (a ceiling behind a lamp housing, a
+            // seat under a desk): handed to every face alike it lit the hidden ones as the
+            // exposed ones, and the two-sided classroom came out 6.6 % brighter than the
+            // ray-traced stochastic solve, light created (1.6 % once split).
             let (v, partial) = self.visibility(r, s, power <= self.power_eps, rng, c);
-            if terminal || !(partial && power > self.power_eps) {
+            if terminal || !partial {
                 if v > 0.0 {
                     let read = if ns.surface { Link::MEAN } else { Link::directional(ns, -d) };
                     links.push(Link { r, s, f: (k * v).min(1.0) as f32, g: d.as_vec3().to_array(), dir: read });

@@ -977,6 +977,14 @@ impl Hierarchy {
         self.direct.as_ref()
     }
 
+    /// Links received by node `k` with their vectors and readings: (source node, factor,
+    /// gradient or direction of arrival, reading), for diagnostics.
+    pub fn links_full(&self, k: u32) -> impl Iterator<Item = (u32, f32, [f32; 3], [f32; 4])> + '_ {
+        let k = k as usize;
+        (self.link_start[k] as usize..self.link_start[k + 1] as usize)
+            .map(move |t| (self.link_src[t], self.link_f[t], self.vec_of(k, t), self.read_of(k, t)))
+    }
+
     /// Links received by node `k`: (source node, factor).
     pub fn links(&self, k: u32) -> impl Iterator<Item = (u32, f32)> + '_ {
         let (a, b) = (self.link_start[k as usize] as usize, self.link_start[k as usize + 1] as usize);
