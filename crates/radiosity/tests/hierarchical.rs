@@ -78,9 +78,12 @@ fn push_pull_conserves_the_power_the_links_carry() {
             h.gather_unguarded(x, &mut y);
             let received: f64 = (0..n).map(|i| area[i] * radiosity::luminance(y[i])).sum();
             let carried = h.link_power(x);
-            // Exact with surface receivers only; with cluster receivers a leaf whose
-            // normal-dependent irradiance would be negative is clamped at zero (only adds).
-            let (lo, hi) = if cluster_receivers { (1.0 - 1e-9, 1.02) } else { (1.0 - 1e-9, 1.0 + 1e-9) };
+            // Exact with surface receivers only; with cluster receivers a face whose
+            // horizon cuts a directional bin takes `max(0, n·Σ w d)` where each link alone
+            // would give `Σ w max(0, n·d)`, never more (measured: 1.2e-6 less). Until the
+            // bins (2026-12-02) a quadratic in the normal lit faces turned away: up to 2 %
+            // more.
+            let (lo, hi) = if cluster_receivers { (1.0 - 1e-4, 1.0 + 1e-9) } else { (1.0 - 1e-9, 1.0 + 1e-9) };
             assert!(
                 received >= lo * carried && received <= hi * carried,
                 "cluster receivers {cluster_receivers}: received {received}, links carry {carried}"

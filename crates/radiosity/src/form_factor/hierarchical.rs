@@ -14,7 +14,7 @@
 //!   nodes of `S`: exact contour integrals ([`crate::geom::kernel`]) for nearby elements,
 //!   `cosθ_R · P_S(−d) / (π r² + P_S(−d))` otherwise (a disk of the node's projected area,
 //!   bounded near it), with `P_S` the orientation-aware projected area of a cluster
-//!   ([`crate::transport::hierarchical::Node::projected_area`]);
+//!   ([`crate::transport::hierarchical::Tree::projected_area`]);
 //! - the link is accepted when the pair is well separated, `(size_R + size_S) / r < θ`
 //!   (`separation`), and its visibility, from `visibility_rays` rays between area-uniform
 //!   points of the two nodes (half as many for links below the power tolerance), is not
@@ -35,7 +35,7 @@
 //!   fully visible or fully hidden (a partly visible pair is split whatever its power: the
 //!   cluster's parts may hide each other), as irradiance per unit
 //!   cosine from one direction, spread to its elements by their normals
-//!   ([`crate::transport::hierarchical::CLAMPED_COS`]); light from concentrated emitters
+//!   ([`crate::transport::hierarchical::DIR_BIN_SIDE`]); light from concentrated emitters
 //!   (emitting elements on under a quarter of the area) always reaches surface nodes
 //!   (exact cosine). Under emission spread over the scene (a furnace) clusters take it too:
 //!   else every cluster is split to its surfaces (the conference room in a furnace had not
@@ -75,7 +75,7 @@ use crate::accel::SceneRays;
 use crate::geom::{self, kernel::point_to_polygon};
 use crate::mesh::{Mesh, Receivers};
 use crate::sampling::{rng_for, stratified, Rng};
-use crate::transport::hierarchical::{Closure, Hierarchy, HierarchyStats, Link, Node, Tree, CLAMPED_COS};
+use crate::transport::hierarchical::{Closure, Hierarchy, HierarchyStats, Link, Node, Tree};
 use crate::{Error, Progress, Result, Rgb};
 
 /// Link refinement settings.
@@ -533,11 +533,7 @@ impl Ctx<'_> {
                 let (f, _) = self.terminal_factor(r, s, &mut rng, c, &mut scratch);
                 c.terminal += 1;
                 if f > 0.0 {
-                    let dir = if ns.surface {
-                        Link::MEAN
-                    } else {
-                        Link::directional(ns, (nr.centroid - ns.centroid).as_dvec3().normalize_or_zero())
-                    };
+                    let dir = if ns.surface { Link::MEAN } else { self.reading(r, s) };
                     links.push(Link { r, s, f: f as f32, g: [0.0; 3], dir });
                 }
                 continue;
@@ -552,11 +548,7 @@ impl Ctx<'_> {
                 let (v, partial) = self.visibility(r, s, power <= self.power_eps, &mut rng, c);
                 if terminal || !(partial && power > self.power_eps) {
                     if v > 0.0 {
-                        let dir = if ns.surface {
-                            Link::MEAN
-                        } else {
-                            Link::directional(ns, (nr.centroid - ns.centroid).as_dvec3().normalize_or_zero())
-                        };
+                        let dir = if ns.surface { Link::MEAN } else { self.reading(r, s) };
                         links.push(Link { r, s, f: (f * v) as f32, g: (g * v).as_vec3().to_array(), dir });
                     }
                     continue;
@@ -646,7 +638,7 @@ impl Ctx<'_> {
     }
 
     /// One pair whose receiver `r` is a cluster: linked (irradiance per unit cosine from the
-    /// direction of `s`, see [`crate::transport::hierarchical::CLAMPED_COS`]) when well
+    /// direction of `s`, see [`crate::transport::hierarchical::DIR_BIN_SIDE`]) when well
     /// separated, `s` holds no concentrated emitter (`Ctx::sharp`) and visibility allows;
     /// else split.
     #[allow(clippy::too_many_arguments)]
@@ -680,9 +672,9 @@ impl Ctx<'_> {
             let (f, d) = self.terminal_factor(r, s, rng, c, sc);
             c.terminal += 1;
             if f > 0.0 && d != DVec3::ZERO {
-                let spread = spread(nr, d);
+                let spread = self.tree.front_area(r, d);
                 if spread > 1e-6 * nr.area as f64 {
-                    let read = if ns.surface { Link::MEAN } else { Link::directional(ns, -d) };
+                    let read = if ns.surface { Link::MEAN } else { Link::directional(ns, self.tree.projected_area(s, -d), -d) };
                     let w = f * nr.area as f64 / spread;
                     links.push(Link { r, s, f: w.min(1.0) as f32, g: d.as_vec3().to_array(), dir: read });
                 }
@@ -702,15 +694,19 @@ impl Ctx<'_> {
                     continue;
                 }
                 let du = d / r2.sqrt();
-                let kq = disk_factor(nq.projected_area(-du), r2);
+                let kq = disk_factor(self.tree.projected_area(q, -du), r2);
                 k += kq;
                 dir += du * kq;
             }
+            // The vector irradiance `Σ k_q d_q`: a face of R with normal n takes
+            // `n · Σ k_q d_q` (exact while the source lies above its horizon), which the
+            // scalar `Σ k_q` along the mean direction would overstate by the source's spread.
             let d = dir.normalize_or_zero();
             if !(k > 0.0) || d == DVec3::ZERO {
                 return;
             }
-            let power = k * nr.projected_area(d) * self.b_hat[s as usize] as f64 * self.rho[r as usize] as f64;
+            let kv = dir.length();
+            let power = k * self.tree.projected_area(r, d) * self.b_hat[s as usize] as f64 * self.rho[r as usize] as f64;
             // Partly visible: always split, whatever the power (unlike a surface receiver).
             // The visible fraction is an average over the cluster's front faces, and one
             // part of a cluster often hides another (a ceiling behind a lamp housing, a
@@ -720,8 +716,8 @@ impl Ctx<'_> {
             let (v, partial) = self.visibility(r, s, power <= self.power_eps, rng, c);
             if terminal || !partial {
                 if v > 0.0 {
-                    let read = if ns.surface { Link::MEAN } else { Link::directional(ns, -d) };
-                    links.push(Link { r, s, f: (k * v).min(1.0) as f32, g: d.as_vec3().to_array(), dir: read });
+                    let read = if ns.surface { Link::MEAN } else { Link::directional(ns, self.tree.projected_area(s, -d), -d) };
+                    links.push(Link { r, s, f: (kv * v).min(1.0) as f32, g: d.as_vec3().to_array(), dir: read });
                 }
                 return;
             }
@@ -830,7 +826,7 @@ impl Ctx<'_> {
                 if cx <= 0.0 || !(r2 > 0.0) {
                     continue;
                 }
-                cx * disk_factor(nq.projected_area(-du), r2)
+                cx * disk_factor(self.tree.projected_area(q, -du), r2)
             };
             f += v;
             dir += du * v;
@@ -887,7 +883,7 @@ impl Ctx<'_> {
                     if cx <= 0.0 {
                         continue;
                     }
-                    fx += cx * disk_factor(nq.projected_area(-d / rl), r2);
+                    fx += cx * disk_factor(self.tree.projected_area(q, -d / rl), r2);
                 }
             }
             f += w * fx;
@@ -932,6 +928,13 @@ impl Ctx<'_> {
             return (1.0, true);
         }
         (seen as f64 / valid as f64, seen != 0 && seen != valid)
+    }
+
+    /// How a link from cluster `s` to node `r` reads it: as seen from `r`'s centroid.
+    fn reading(&self, r: u32, s: u32) -> [f32; 4] {
+        let (nr, ns) = (self.node(r), self.node(s));
+        let d = (nr.centroid - ns.centroid).as_dvec3().normalize_or_zero();
+        Link::directional(ns, self.tree.projected_area(s, d), d)
     }
 
     /// Point-sampled factor between elements `i` (receiver) and `j`.
@@ -1020,22 +1023,6 @@ fn per_element<T: Send + Sync + Clone>(
         return Err(Error::Cancelled);
     }
     Ok(out)
-}
-
-/// `Σ_leaves A · CLAMPED_COS(n·d)` over node `nr`: what its leaves take in all, per unit of
-/// a cluster receiver's link from direction `d`.
-fn spread(nr: &Node, d: DVec3) -> f64 {
-    CLAMPED_COS[0] * nr.area as f64 + CLAMPED_COS[1] * nr.n_sum.as_dvec3().dot(d) + CLAMPED_COS[2] * quad_form(&nr.n_moment, d)
-}
-
-/// `dᵀ M d` for the moments `(xx, yy, zz, xy, xz, yz)`.
-#[inline]
-fn quad_form(m: &[f32; 6], d: DVec3) -> f64 {
-    let m = m.map(|v| v as f64);
-    m[0] * d.x * d.x
-        + m[1] * d.y * d.y
-        + m[2] * d.z * d.z
-        + 2.0 * (m[3] * d.x * d.y + m[4] * d.x * d.z + m[5] * d.y * d.z)
 }
 
 /// The factor from a point to a disk of area `p` facing it at squared distance `r2`

@@ -33,15 +33,38 @@ use crate::geom::bounds_3d;
 use crate::mesh::Mesh;
 use crate::Rgb;
 
-/// The clamped cosine `max(0, t)` to second order in Legendre polynomials,
-/// `1/4 + t/2 + 5/16 · P₂(t) = 3/32 + t/2 + 15/32 t²`: how a cluster receiver's leaves,
-/// whatever their normal `n`, take irradiance arriving from direction `d` (`t = n·d`).
-/// Irradiance is a low-frequency function of the normal (Ramamoorthi & Hanrahan 2001), so
-/// over the many directions a cluster receives from the error is small; for one direction
-/// it is at most 0.094 of the peak. Links from concentrated emitters never go to cluster
-/// receivers. (Tried 2026-12-02: `(1 + t)²/4`, never negative and exact at `t = ±1`, with
-/// each link normalized to its projected area: classroom per-object median 3.95 → 6.83 %.)
-pub const CLAMPED_COS: [f64; 3] = [3.0 / 32.0, 0.5, 15.0 / 32.0];
+/// Cells per side of each cube face in a cluster receiver's directional bins: irradiance
+/// arriving at a cluster (from links whose receiver is a cluster) is kept per bin of
+/// arrival direction as `V_b = Σ_{links in b} w · d` (per colour channel), and a surface
+/// below the cluster with normal `n` takes `Σ_b max(0, n·V_b)`: the exact clamped cosine
+/// `Σ w · max(0, n·d)` for every bin wholly above or below its horizon, so a face turned
+/// away (the back copy of a two-sided wall, a desk's underside) takes nothing and the power
+/// a link carries is what the cluster's front faces intercept. (Until 2026-12-02 a
+/// second-order Legendre fit of the clamped cosine, `3/32 + t/2 + 15/32 t²`, stood here:
+/// it gives 1/16 of the peak to a face turned away and 3/32 edge-on, and the two-sided
+/// classroom came out 14 % brighter than with explicit rows, light created.)
+pub const DIR_BIN_SIDE: usize = 4;
+
+/// Number of directional bins (six cube faces).
+pub const DIR_BINS: usize = 6 * DIR_BIN_SIDE * DIR_BIN_SIDE;
+
+/// The directional bin of the unit direction `d` (cube map: the face of its largest
+/// component, then a `DIR_BIN_SIDE²` grid on it).
+#[inline]
+pub fn dir_bin(d: DVec3) -> usize {
+    let a = d.abs();
+    let (axis, u, v, m) = if a.x >= a.y && a.x >= a.z {
+        (0, d.y, d.z, d.x)
+    } else if a.y >= a.z {
+        (1, d.x, d.z, d.y)
+    } else {
+        (2, d.x, d.y, d.z)
+    };
+    let face = 2 * axis + (m < 0.0) as usize;
+    let inv = if a.max_element() > 0.0 { 1.0 / m.abs() } else { 0.0 };
+    let cell = |t: f64| (((t * inv + 1.0) * 0.5 * DIR_BIN_SIDE as f64) as usize).min(DIR_BIN_SIDE - 1);
+    (face * DIR_BIN_SIDE + cell(u)) * DIR_BIN_SIDE + cell(v)
+}
 
 /// Marks "no child".
 pub const NONE: u32 = u32::MAX;
@@ -123,6 +146,12 @@ pub struct Tree {
     /// Prefix sums of the open areas in tree order (`order.len() + 1` entries), for
     /// area-uniform sampling of a node.
     pub area_prefix: Vec<f64>,
+    /// Per node: its normal distribution, `normal_bins[normal_start[k] .. normal_start[k+1]]`,
+    /// the sums `Σ A_j n_j` of its elements by direction bin of `n_j` ([`dir_bin`]); empty
+    /// for surface nodes, whose `n_sum` is exact. See [`Tree::projected_area`].
+    pub normal_start: Vec<u32>,
+    /// The bins' area-weighted normal sums.
+    pub normal_bins: Vec<Vec3>,
 }
 
 /// Elements of one plane share a key: normal and offset quantised.
@@ -204,7 +233,9 @@ impl Tree {
                         best = p;
                     }
                 }
-                if a >= 0.5 * total {
+                // (Half with a rounding margin: the two sides of a two-sided surface hold
+                // exactly half each, and summed in another order one falls just short.)
+                if a >= 0.5 * total * (1.0 - 1e-9) {
                     slice.sort_by_key(|&e| plane[e as usize] != best);
                     mid = slice.iter().position(|&e| plane[e as usize] != best).unwrap_or(count);
                 }
@@ -230,7 +261,7 @@ impl Tree {
             stack.push(c0 + 1);
             stack.push(c0);
         }
-        let mut tree = Tree { nodes, order, leaf_of: vec![NONE; n], area_prefix: Vec::new() };
+        let mut tree = Tree { nodes, order, leaf_of: vec![NONE; n], ..Default::default() };
         tree.refit(mesh, area);
         tree
     }
@@ -287,6 +318,69 @@ impl Tree {
         }
         self.leaf_of = leaf_of;
         self.area_prefix = area_prefix;
+        self.bin_normals();
+    }
+
+    /// The normal distribution of every cluster node (see [`Tree::normal_bins`]), bottom-up:
+    /// a surface child is one entry, a cluster child its own list.
+    fn bin_normals(&mut self) {
+        let nodes = &self.nodes;
+        let m = nodes.len();
+        let mut lists: Vec<Vec<(u8, DVec3)>> = vec![Vec::new(); m];
+        let mut dense = [DVec3::ZERO; DIR_BINS];
+        let mut used: Vec<u8> = Vec::with_capacity(DIR_BINS);
+        for k in (0..m).rev() {
+            let nd = &nodes[k];
+            if nd.surface {
+                continue;
+            }
+            used.clear();
+            for c in nd.child {
+                let cn = &nodes[c as usize];
+                let mut add = |b: u8, v: DVec3| {
+                    if dense[b as usize] == DVec3::ZERO {
+                        used.push(b);
+                    }
+                    dense[b as usize] += v;
+                };
+                if cn.surface {
+                    let n = cn.n_sum.as_dvec3();
+                    add(dir_bin(n.normalize_or_zero()) as u8, n);
+                } else {
+                    for &(b, v) in &lists[c as usize] {
+                        add(b, v);
+                    }
+                }
+            }
+            used.sort_unstable();
+            used.dedup();
+            lists[k] = used.iter().map(|&b| (b, std::mem::take(&mut dense[b as usize]))).collect();
+        }
+        let mut start = Vec::with_capacity(m + 1);
+        start.push(0u32);
+        let mut bins = Vec::new();
+        for l in &lists {
+            bins.extend(l.iter().map(|&(_, v)| v.as_vec3()));
+            start.push(bins.len() as u32);
+        }
+        self.normal_start = start;
+        self.normal_bins = bins;
+    }
+
+    /// `Σ_j A_j max(0, n_j·d)`: the projected area of node `k`'s front faces towards the unit
+    /// direction `d`. Exact for a surface node; for a cluster the sum over its normal bins,
+    /// `Σ_b max(0, m_b·d)`, exact unless a bin's normals straddle `d`'s horizon. (The
+    /// estimate from the first two normal moments, [`Node::projected_area`], is an upper
+    /// bound that overstated a desk's top by ~20 % where its legs and two-sided copies mix
+    /// normals, and with it every row summed above one in the two-sided classroom.)
+    #[inline]
+    pub fn projected_area(&self, k: u32, d: DVec3) -> f64 {
+        let nd = &self.nodes[k as usize];
+        if nd.surface || self.normal_start.is_empty() {
+            return nd.projected_area(d);
+        }
+        let (a, b) = (self.normal_start[k as usize] as usize, self.normal_start[k as usize + 1] as usize);
+        self.normal_bins[a..b].iter().map(|m| m.as_dvec3().dot(d).max(0.0)).sum()
     }
 
     /// True when node `a` holds every element of node `b` (`b` is `a` or below it).
@@ -294,6 +388,23 @@ impl Tree {
     pub fn contains(&self, a: u32, b: u32) -> bool {
         let (na, nb) = (&self.nodes[a as usize], &self.nodes[b as usize]);
         na.first <= nb.first && nb.first + nb.count <= na.first + na.count
+    }
+
+    /// `Σ A_j max(0, n_j·d)` over the elements of node `k` (open areas): the area its front
+    /// faces present to light arriving from the unit direction `d`, exactly (compare
+    /// [`Node::projected_area`], the estimate from moments).
+    pub fn front_area(&self, k: u32, d: DVec3) -> f64 {
+        let nd = &self.nodes[k as usize];
+        if nd.surface {
+            return (nd.n_sum.as_dvec3().dot(d)).max(0.0);
+        }
+        self.order[nd.first as usize..(nd.first + nd.count) as usize]
+            .iter()
+            .map(|&e| {
+                let leaf = &self.nodes[self.leaf_of[e as usize] as usize];
+                leaf.n_sum.as_dvec3().dot(d).max(0.0)
+            })
+            .sum()
     }
 
     /// The element at area fraction `u ∈ [0, 1)` of node `k` (area-uniform choice).
@@ -353,7 +464,7 @@ pub struct HierarchyStats {
     pub links: u64,
     /// Links whose source is a cluster (several planes).
     pub cluster_links: u64,
-    /// Links whose receiver is a cluster (irradiance by direction, see [`CLAMPED_COS`]).
+    /// Links whose receiver is a cluster (irradiance by direction, see [`DIR_BIN_SIDE`]).
     pub cluster_receiver_links: u64,
     /// Links between two leaves (single elements).
     pub leaf_links: u64,
@@ -450,9 +561,9 @@ impl Link {
     /// `Σ A_j max(0, n_j·d) B_j / Σ A_j max(0, n_j·d)` with `max(0, c) = ½|c| + ½c`, the
     /// `|c|` part taken at the mean radiosity and the `c` part exact through `N_B`. A desk
     /// seen from the ceiling then gives its lit top's radiosity, not the mean of top and
-    /// dark underside (the classroom ceiling was 27 % dark without it).
-    pub fn directional(s: &Node, d: DVec3) -> [f32; 4] {
-        let p = s.projected_area(d);
+    /// dark underside (the classroom ceiling was 27 % dark without it). `p` is its projected
+    /// area towards `d` ([`Tree::projected_area`]).
+    pub fn directional(s: &Node, p: f64, d: DVec3) -> [f32; 4] {
         // Seen almost edge-on the reading divides by a vanishing projected area: rounding
         // of the f32 coefficients would dominate (raw row sums of 2 000 in the classroom).
         // Such links carry almost nothing (their factor has the same projected area).
@@ -484,11 +595,6 @@ pub struct Hierarchy {
     link_dir: Vec<[f32; 4]>,
     dir_base: Vec<u32>,
     cluster_count: Vec<u32>,
-    /// Per node: its slot in the quadratic-irradiance buffer when it is a cluster that
-    /// receives or passes on cluster-receiver links, else [`NONE`].
-    quad_slot: Vec<u32>,
-    /// The node of every slot.
-    quad_node: Vec<u32>,
     /// Per element: scale applied to what its links bring, fitting the row to the measured
     /// closure (1 without one; see [`Hierarchy::from_parts`]).
     link_scale: Vec<f32>,
@@ -499,6 +605,16 @@ pub struct Hierarchy {
     direct: Option<SparseRows>,
     /// What it holds.
     pub stats: HierarchyStats,
+}
+
+/// Elements below which [`Hierarchy::walk_clusters`] stays on one thread.
+const PARALLEL_WALK: usize = 4096;
+
+/// What links read from their sources during one product (pulled per node).
+struct Sources<'a> {
+    mean: &'a [Rgb],
+    nb: &'a [[DVec3; 3]],
+    hi: &'a [Rgb],
 }
 
 impl Hierarchy {
@@ -588,11 +704,6 @@ impl Hierarchy {
         stats.nodes = m as u64;
         stats.surface_nodes = tree.nodes.iter().filter(|n| n.surface).count() as u64;
         let n = tree.order.len();
-        let quad_node: Vec<u32> = (0..m as u32).filter(|&k| !tree.nodes[k as usize].surface).collect();
-        let mut quad_slot = vec![NONE; m];
-        for (slot, &k) in quad_node.iter().enumerate() {
-            quad_slot[k as usize] = slot as u32;
-        }
         let mut h = Hierarchy {
             tree,
             link_start,
@@ -603,8 +714,6 @@ impl Hierarchy {
             link_dir,
             dir_base,
             cluster_count,
-            quad_slot,
-            quad_node,
             link_scale: vec![1.0; n],
             scale: vec![1.0; n],
             direct,
@@ -774,71 +883,24 @@ impl Hierarchy {
             }
             *gk = (acc, grad);
         });
-        // Cluster receivers: each link from direction d adds w·(3/32 + ½ n·d + 15/32 (n·d)²).
-        let cluster: Vec<(Rgb, [DVec3; 3], [[f64; 6]; 3])> = self
-            .quad_node
-            .par_iter()
-            .with_min_len(64)
-            .map(|&k| {
-                let k = k as usize;
-                let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
-                let (mut s, mut l, mut q) = (Rgb::ZERO, [DVec3::ZERO; 3], [[0.0f64; 6]; 3]);
-                for t in a..b {
-                    let w = self.source_value(k, t, &mean, &nb, &hi) * self.link_f[t] as f64;
-                    let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
-                    let dd = [d.x * d.x, d.y * d.y, d.z * d.z, 2.0 * d.x * d.y, 2.0 * d.x * d.z, 2.0 * d.y * d.z];
-                    s += w * CLAMPED_COS[0];
-                    for c in 0..3 {
-                        l[c] += d * (w[c] * CLAMPED_COS[1]);
-                        for (qc, ddc) in q[c].iter_mut().zip(dd) {
-                            *qc += w[c] * CLAMPED_COS[2] * ddc;
-                        }
-                    }
-                }
-                (s, l, q)
-            })
-            .collect();
-        let mut quad = Vec::with_capacity(cluster.len());
-        for (&k, (s, l, q)) in self.quad_node.iter().zip(cluster) {
-            g[k as usize] = (s, l);
-            quad.push(q);
+        // Cluster receivers: irradiance by direction of arrival, walked down the clusters
+        // (each path's bins summed on the way) and evaluated at the normal of each surface
+        // child (see [`DIR_BIN_SIDE`]).
+        if m > 0 && !nodes[0].surface {
+            let mut bins = vec![[DVec3::ZERO; 3]; DIR_BINS];
+            let src = Sources { mean: &mean, nb: &nb, hi: &hi };
+            for (c, v) in self.walk_clusters(0, &mut bins, 0, &src) {
+                g[c as usize].0 += v;
+            }
         }
-        // Push: every ancestor's irradiance, evaluated at the child's centroid, top-down;
-        // a cluster's normal-dependent irradiance is handed to cluster children as it is and
-        // evaluated at the normal of surface children.
+        // Push: every ancestor's irradiance, evaluated at the child's centroid, top-down
+        // (clusters have handed theirs to their surface children above).
         for k in 0..m {
             let nd = &nodes[k];
-            let (v, grad) = g[k];
-            let slot = self.quad_slot[k];
-            if slot != NONE {
-                let q = quad[slot as usize];
-                for c in nd.child {
-                    if c == NONE {
-                        continue;
-                    }
-                    let cn = &nodes[c as usize];
-                    let cs = self.quad_slot[c as usize];
-                    if cs != NONE {
-                        let gc = &mut g[c as usize];
-                        gc.0 += v;
-                        for t in 0..3 {
-                            gc.1[t] += grad[t];
-                        }
-                        let qc = &mut quad[cs as usize];
-                        for t in 0..3 {
-                            for u in 0..6 {
-                                qc[t][u] += q[t][u];
-                            }
-                        }
-                    } else {
-                        let n = cn.normal();
-                        let nn = [n.x * n.x, n.y * n.y, n.z * n.z, n.x * n.y, n.x * n.z, n.y * n.z];
-                        let e = |t: usize| v[t] + grad[t].dot(n) + q[t].iter().zip(nn).map(|(a, b)| a * b).sum::<f64>();
-                        g[c as usize].0 += Rgb::new(e(0), e(1), e(2)).max(Rgb::ZERO);
-                    }
-                }
+            if !nd.surface {
                 continue;
             }
+            let (v, grad) = g[k];
             if nd.child[0] != NONE {
                 for c in nd.child {
                     let d = (nodes[c as usize].centroid - nd.centroid).as_dvec3();
@@ -868,6 +930,61 @@ impl Hierarchy {
                 *ye = (*ye * self.scale[e] as f64).min(top);
             }
         });
+    }
+
+    /// Cluster receivers below node `k` (a cluster): adds `k`'s links to the directional
+    /// `bins` (`active` counts links on the path so far), hands the sum to each surface
+    /// child as `Σ_b max(0, n·V_b)` at its normal and recurses into cluster children; the
+    /// bins are restored before returning. Large subtrees run in parallel on copies.
+    fn walk_clusters(&self, k: usize, bins: &mut [[DVec3; 3]], active: usize, src: &Sources) -> Vec<(u32, Rgb)> {
+        let nodes = &self.tree.nodes;
+        let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
+        // The bins this node's links change, with their old values (restored exactly).
+        let mut saved: Vec<(usize, [DVec3; 3])> = Vec::with_capacity(b - a);
+        for t in a..b {
+            let w = self.source_value(k, t, src.mean, src.nb, src.hi) * self.link_f[t] as f64;
+            let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
+            let bin = dir_bin(d);
+            saved.push((bin, bins[bin]));
+            for c in 0..3 {
+                bins[bin][c] += d * w[c];
+            }
+        }
+        let active = active + (b - a);
+        let nd = &nodes[k];
+        let mut out = Vec::new();
+        let kids: Vec<u32> = nd.child.iter().copied().filter(|&c| c != NONE).collect();
+        for &c in &kids {
+            let cn = &nodes[c as usize];
+            if cn.surface && active > 0 {
+                let n = cn.normal();
+                let mut v = [0.0; 3];
+                for bin in bins.iter() {
+                    for (vc, bc) in v.iter_mut().zip(bin) {
+                        *vc += n.dot(*bc).max(0.0);
+                    }
+                }
+                out.push((c, Rgb::new(v[0], v[1], v[2])));
+            }
+        }
+        let clusters: Vec<u32> = kids.into_iter().filter(|&c| !nodes[c as usize].surface).collect();
+        if clusters.len() == 2 && nd.count as usize >= PARALLEL_WALK {
+            let mut copy = bins.to_vec();
+            let (x, y) = rayon::join(
+                || self.walk_clusters(clusters[0] as usize, &mut copy, active, src),
+                || self.walk_clusters(clusters[1] as usize, bins, active, src),
+            );
+            out.extend(x);
+            out.extend(y);
+        } else {
+            for c in clusters {
+                out.extend(self.walk_clusters(c as usize, bins, active, src));
+            }
+        }
+        for (bin, old) in saved.into_iter().rev() {
+            bins[bin] = old;
+        }
+        out
     }
 
     /// The vector of link `t` of receiver `k` (zero for a leaf receiver).
@@ -911,7 +1028,7 @@ impl Hierarchy {
     }
 
     /// The power the links carry for radiosity `x`, `Σ_links A_R · f · B̃_S` (luminance of
-    /// RGB; for a cluster receiver each leaf's share by its normal, see [`CLAMPED_COS`]),
+    /// RGB; for a cluster receiver each leaf's share by its normal, see [`DIR_BIN_SIDE`]),
     /// summed link by link without the push: what the leaves must receive in all (the
     /// push–pull conservation check; equal to `Σ_i A_i (F·x)_i` while no row is scaled and
     /// no leaf's normal-dependent irradiance is clamped at zero).
@@ -947,14 +1064,9 @@ impl Hierarchy {
                 if nodes[k].surface {
                     total += nodes[k].area as f64 * w;
                 } else {
-                    // A cluster receiver: each leaf by its normal (unclamped).
+                    // A cluster receiver: each leaf by its normal.
                     let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
-                    let r = &nodes[k];
-                    for slot in r.first..r.first + r.count {
-                        let leaf = &nodes[self.tree.leaf_of[self.tree.order[slot as usize] as usize] as usize];
-                        let c = leaf.normal().dot(d);
-                        total += leaf.area as f64 * w * (CLAMPED_COS[0] + CLAMPED_COS[1] * c + CLAMPED_COS[2] * c * c);
-                    }
+                    total += w * self.tree.front_area(k as u32, d);
                 }
             }
         }
@@ -1006,6 +1118,8 @@ impl Transport for Hierarchy {
         t.nodes.len() * std::mem::size_of::<Node>()
             + (t.order.len() + t.leaf_of.len()) * 4
             + t.area_prefix.len() * 8
+            + t.normal_start.len() * 4
+            + t.normal_bins.len() * 12
             + self.link_start.len() * 4
             + self.link_src.len() * 4
             + self.link_f.len() * 4
