@@ -674,7 +674,7 @@ impl Ctx<'_> {
             if f > 0.0 && d != DVec3::ZERO {
                 let spread = self.tree.front_area(r, d);
                 if spread > 1e-6 * nr.area as f64 {
-                    let read = if ns.surface { Link::MEAN } else { Link::directional(ns, self.tree.projected_area(s, -d), -d) };
+                    let read = if ns.surface { Link::MEAN } else { self.reading_towards(s, -d) };
                     let w = f * nr.area as f64 / spread;
                     links.push(Link { r, s, f: w.min(1.0) as f32, g: d.as_vec3().to_array(), dir: read });
                 }
@@ -716,7 +716,7 @@ impl Ctx<'_> {
             let (v, partial) = self.visibility(r, s, power <= self.power_eps, rng, c);
             if terminal || !partial {
                 if v > 0.0 {
-                    let read = if ns.surface { Link::MEAN } else { Link::directional(ns, self.tree.projected_area(s, -d), -d) };
+                    let read = if ns.surface { Link::MEAN } else { self.reading_towards(s, -d) };
                     links.push(Link { r, s, f: (kv * v).min(1.0) as f32, g: d.as_vec3().to_array(), dir: read });
                 }
                 return;
@@ -933,8 +933,13 @@ impl Ctx<'_> {
     /// How a link from cluster `s` to node `r` reads it: as seen from `r`'s centroid.
     fn reading(&self, r: u32, s: u32) -> [f32; 4] {
         let (nr, ns) = (self.node(r), self.node(s));
-        let d = (nr.centroid - ns.centroid).as_dvec3().normalize_or_zero();
-        Link::directional(ns, self.tree.projected_area(s, d), d)
+        self.reading_towards(s, (nr.centroid - ns.centroid).as_dvec3().normalize_or_zero())
+    }
+
+    /// How a link reads cluster `s` seen from the unit direction `d` (from `s` towards the
+    /// receiver).
+    fn reading_towards(&self, s: u32, d: DVec3) -> [f32; 4] {
+        Link::directional(self.node(s), self.tree.projected_area(s, d), d)
     }
 
     /// Point-sampled factor between elements `i` (receiver) and `j`.

@@ -88,9 +88,6 @@ pub struct Node {
     pub centroid: Vec3,
     /// `Σ A_j n_j` over its elements (for a surface node: area × normal).
     pub n_sum: Vec3,
-    /// `Σ A_j n_j n_jᵀ` (xx, yy, zz, xy, xz, yz): with `n_sum`, the projected area seen from
-    /// any direction (see [`Node::projected_area`]).
-    pub n_moment: [f32; 6],
     /// True when all its elements lie in one plane and face one way.
     pub surface: bool,
     /// Depth below the root (0).
@@ -114,23 +111,6 @@ impl Node {
     #[inline]
     pub fn normal(&self) -> DVec3 {
         self.n_sum.as_dvec3().normalize_or_zero()
-    }
-
-    /// Projected area of the node's front faces towards the unit direction `d`,
-    /// `Σ_j A_j max(0, n_j·d)`, estimated from the node's first two normal moments:
-    /// `½ Σ A|n·d| + ½ Σ A n·d` with `Σ A|n·d| ≤ √(A · dᵀMd)` (Cauchy–Schwarz). Exact for a
-    /// surface node (every `n_j` equal); for a cluster an orientation-aware estimate that is
-    /// zero for a plane facing away and `A/4`-like for a closed, rounded object.
-    #[inline]
-    pub fn projected_area(&self, d: DVec3) -> f64 {
-        let m = &self.n_moment;
-        let (x, y, z) = (d.x, d.y, d.z);
-        let q = m[0] as f64 * x * x
-            + m[1] as f64 * y * y
-            + m[2] as f64 * z * z
-            + 2.0 * (m[3] as f64 * x * y + m[4] as f64 * x * z + m[5] as f64 * y * z);
-        let abs = (self.area as f64 * q.max(0.0)).sqrt();
-        (0.5 * abs + 0.5 * self.n_sum.as_dvec3().dot(d)).max(0.0)
     }
 }
 
@@ -195,7 +175,6 @@ impl Tree {
             area: 0.0,
             centroid: Vec3::ZERO,
             n_sum: Vec3::ZERO,
-            n_moment: [0.0; 6],
             surface: false,
             depth: 0,
         };
@@ -266,7 +245,7 @@ impl Tree {
         tree
     }
 
-    /// Recomputes every node's box, area, centroid and normal moments, bottom-up, from the
+    /// Recomputes every node's box, area, centroid, normal sum and normal bins, bottom-up, from the
     /// elements' `area` (e.g. their open areas once the coverage test has run; the
     /// structure, built on other areas, is kept).
     pub fn refit(&mut self, mesh: &Mesh, area: &[f64]) {
@@ -290,7 +269,6 @@ impl Tree {
                 node.area = a as f32;
                 node.centroid = e.centroid.as_vec3();
                 node.n_sum = (nn * a).as_vec3();
-                node.n_moment = [nn.x * nn.x, nn.y * nn.y, nn.z * nn.z, nn.x * nn.y, nn.x * nn.z, nn.y * nn.z].map(|v| (v * a) as f32);
             } else {
                 let (a, b) = (nodes[nd.child[0] as usize], nodes[nd.child[1] as usize]);
                 let area = a.area + b.area;
@@ -304,9 +282,6 @@ impl Tree {
                     0.5 * (a.centroid + b.centroid)
                 };
                 node.n_sum = a.n_sum + b.n_sum;
-                for t in 0..6 {
-                    node.n_moment[t] = a.n_moment[t] + b.n_moment[t];
-                }
             }
         }
         let mut area_prefix = Vec::with_capacity(n + 1);
@@ -370,14 +345,14 @@ impl Tree {
     /// `Σ_j A_j max(0, n_j·d)`: the projected area of node `k`'s front faces towards the unit
     /// direction `d`. Exact for a surface node; for a cluster the sum over its normal bins,
     /// `Σ_b max(0, m_b·d)`, exact unless a bin's normals straddle `d`'s horizon. (The
-    /// estimate from the first two normal moments, [`Node::projected_area`], is an upper
-    /// bound that overstated a desk's top by ~20 % where its legs and two-sided copies mix
-    /// normals, and with it every row summed above one in the two-sided classroom.)
+    /// estimate it replaced, the Cauchy–Schwarz bound from the first two normal moments,
+    /// overstated a desk's top by ~20 % where its legs and two-sided copies mix normals.)
+    /// [`Tree::front_area`] is the exact sum.
     #[inline]
     pub fn projected_area(&self, k: u32, d: DVec3) -> f64 {
         let nd = &self.nodes[k as usize];
-        if nd.surface || self.normal_start.is_empty() {
-            return nd.projected_area(d);
+        if nd.surface {
+            return nd.n_sum.as_dvec3().dot(d).max(0.0);
         }
         let (a, b) = (self.normal_start[k as usize] as usize, self.normal_start[k as usize + 1] as usize);
         self.normal_bins[a..b].iter().map(|m| m.as_dvec3().dot(d).max(0.0)).sum()
@@ -390,21 +365,23 @@ impl Tree {
         na.first <= nb.first && nb.first + nb.count <= na.first + na.count
     }
 
-    /// `Σ A_j max(0, n_j·d)` over the elements of node `k` (open areas): the area its front
-    /// faces present to light arriving from the unit direction `d`, exactly (compare
-    /// [`Node::projected_area`], the estimate from moments).
+    /// `Σ A_j max(0, n_j·d)` over the elements of node `k` (open areas), exactly: the area
+    /// its front faces present to light arriving from the unit direction `d`, summed over
+    /// the topmost surface nodes below `k` (each one plane, so exact; what the push of a
+    /// cluster receiver hands out per unit of a link from `d`). [`Tree::projected_area`] is
+    /// the constant-time estimate.
     pub fn front_area(&self, k: u32, d: DVec3) -> f64 {
-        let nd = &self.nodes[k as usize];
-        if nd.surface {
-            return (nd.n_sum.as_dvec3().dot(d)).max(0.0);
+        let mut total = 0.0;
+        let mut stack = vec![k];
+        while let Some(k) = stack.pop() {
+            let nd = &self.nodes[k as usize];
+            if nd.surface {
+                total += nd.n_sum.as_dvec3().dot(d).max(0.0);
+            } else {
+                stack.extend(nd.child.iter().filter(|&&c| c != NONE));
+            }
         }
-        self.order[nd.first as usize..(nd.first + nd.count) as usize]
-            .iter()
-            .map(|&e| {
-                let leaf = &self.nodes[self.leaf_of[e as usize] as usize];
-                leaf.n_sum.as_dvec3().dot(d).max(0.0)
-            })
-            .sum()
+        total
     }
 
     /// The element at area fraction `u ∈ [0, 1)` of node `k` (area-uniform choice).
@@ -889,7 +866,9 @@ impl Hierarchy {
         if m > 0 && !nodes[0].surface {
             let mut bins = vec![[DVec3::ZERO; 3]; DIR_BINS];
             let src = Sources { mean: &mean, nb: &nb, hi: &hi };
-            for (c, v) in self.walk_clusters(0, &mut bins, 0, &src) {
+            let mut lit = Vec::new();
+            self.walk_clusters(0, &mut bins, 0, &src, &mut lit);
+            for (c, v) in lit {
                 g[c as usize].0 += v;
             }
         }
@@ -934,9 +913,10 @@ impl Hierarchy {
 
     /// Cluster receivers below node `k` (a cluster): adds `k`'s links to the directional
     /// `bins` (`active` counts links on the path so far), hands the sum to each surface
-    /// child as `Σ_b max(0, n·V_b)` at its normal and recurses into cluster children; the
-    /// bins are restored before returning. Large subtrees run in parallel on copies.
-    fn walk_clusters(&self, k: usize, bins: &mut [[DVec3; 3]], active: usize, src: &Sources) -> Vec<(u32, Rgb)> {
+    /// child as `Σ_b max(0, n·V_b)` at its normal (appended to `out`) and recurses into
+    /// cluster children; the bins are restored before returning. Large subtrees run in
+    /// parallel on copies.
+    fn walk_clusters(&self, k: usize, bins: &mut [[DVec3; 3]], active: usize, src: &Sources, out: &mut Vec<(u32, Rgb)>) {
         let nodes = &self.tree.nodes;
         let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
         // The bins this node's links change, with their old values (restored exactly).
@@ -952,39 +932,37 @@ impl Hierarchy {
         }
         let active = active + (b - a);
         let nd = &nodes[k];
-        let mut out = Vec::new();
-        let kids: Vec<u32> = nd.child.iter().copied().filter(|&c| c != NONE).collect();
-        for &c in &kids {
-            let cn = &nodes[c as usize];
-            if cn.surface && active > 0 {
-                let n = cn.normal();
-                let mut v = [0.0; 3];
-                for bin in bins.iter() {
-                    for (vc, bc) in v.iter_mut().zip(bin) {
-                        *vc += n.dot(*bc).max(0.0);
-                    }
-                }
-                out.push((c, Rgb::new(v[0], v[1], v[2])));
+        let is_cluster = |c: u32| c != NONE && !nodes[c as usize].surface;
+        for c in nd.child {
+            if c == NONE || !nodes[c as usize].surface || active == 0 {
+                continue;
             }
+            let n = nodes[c as usize].normal();
+            let mut v = [0.0; 3];
+            for bin in bins.iter() {
+                for (vc, bc) in v.iter_mut().zip(bin) {
+                    *vc += n.dot(*bc).max(0.0);
+                }
+            }
+            out.push((c, Rgb::new(v[0], v[1], v[2])));
         }
-        let clusters: Vec<u32> = kids.into_iter().filter(|&c| !nodes[c as usize].surface).collect();
-        if clusters.len() == 2 && nd.count as usize >= PARALLEL_WALK {
+        let [c0, c1] = nd.child;
+        if is_cluster(c0) && is_cluster(c1) && nd.count as usize >= PARALLEL_WALK {
             let mut copy = bins.to_vec();
-            let (x, y) = rayon::join(
-                || self.walk_clusters(clusters[0] as usize, &mut copy, active, src),
-                || self.walk_clusters(clusters[1] as usize, bins, active, src),
+            let mut other = Vec::new();
+            rayon::join(
+                || self.walk_clusters(c0 as usize, &mut copy, active, src, &mut other),
+                || self.walk_clusters(c1 as usize, bins, active, src, out),
             );
-            out.extend(x);
-            out.extend(y);
+            out.append(&mut other);
         } else {
-            for c in clusters {
-                out.extend(self.walk_clusters(c as usize, bins, active, src));
+            for c in nd.child.into_iter().filter(|&c| is_cluster(c)) {
+                self.walk_clusters(c as usize, bins, active, src, out);
             }
         }
         for (bin, old) in saved.into_iter().rev() {
             bins[bin] = old;
         }
-        out
     }
 
     /// The vector of link `t` of receiver `k` (zero for a leaf receiver).
