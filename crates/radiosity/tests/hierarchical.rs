@@ -183,7 +183,7 @@ fn links_are_refined_under_a_shadow_boundary() {
         total += a * rows.mesh.elements[i].area;
     }
     // Measured 2026-12-02: 5.1 % (L1) with tolerance 1e-5; the penumbra's elements differ.
-    assert!(diff <= 0.06 * total, "floor differs from rows by {:.2} % (L1)", 100.0 * diff / total);
+    assert!(diff <= 0.06 * total, "floor differs from rows by {:.2} % (L1); {:?}", 100.0 * diff / total, h.stats);
     // Umbra and lit floor differ as they must.
     let b = &hier.solution.radiosity;
     let at = |x: f64, z: f64| {
@@ -789,4 +789,278 @@ fn conference_furnace_with_clusters() {
         100.0 * worst
     );
     assert!(over == 0, "{over} of {} open elements over 1 %, worst {:.3} %", errs.len(), 100.0 * worst);
+}
+
+/// Diagnostic (ignored): where the hierarchy's light on back sides goes too far. Solves
+/// the conference (lit) with the hierarchy and with stochastic Jacobi on the same mesh,
+/// and lists the polygons whose back copies hold the most excess power, `Σ A (B_h − B_s)`.
+#[test]
+#[ignore]
+fn conference_back_light() {
+    let Some(path) = common::shared("scenes/conference/conference-lit.toml") else {
+        return;
+    };
+    let scene = radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    let h = solve_scene(scene.clone(), &hierarchical(), &NoProgress).unwrap();
+    let mut s = Settings { transport: Kind::Rows, solver: Solver::StochasticJacobi, ..Default::default() };
+    s.max_elements = 2_000_000;
+    s.solve.rays = Some(std::env::var("RAYS").ok().and_then(|x| x.parse().ok()).unwrap_or(10_000_000));
+    s.solve.max_iterations = 10;
+    let st = solve_scene(scene, &s, &NoProgress).unwrap();
+    assert_eq!(h.mesh.len(), st.mesh.len());
+    let area = h.receivers.open_areas(&h.mesh);
+    let (bh, bs) = (&h.solution.radiosity, &st.solution.radiosity);
+    let mut by_poly: std::collections::HashMap<u32, (f64, f64, f64, f64)> = Default::default();
+    let mut front: std::collections::HashMap<u32, (f64, f64, f64, f64)> = Default::default();
+    let (mut fh, mut fs, mut bkh, mut bks, mut fa, mut ba) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for i in 0..h.mesh.len() {
+        let e = &h.mesh.elements[i];
+        let p = &h.scene.polygons[e.patch as usize];
+        let a = area[i];
+        if p.back_side {
+            bkh += a * bh[i].y;
+            bks += a * bs[i].y;
+            ba += a;
+            let en = by_poly.entry(e.patch).or_default();
+            en.0 += a * (bh[i].y - bs[i].y);
+            en.1 += a;
+            en.2 += a * bh[i].y;
+            en.3 += a * bs[i].y;
+        } else {
+            fh += a * bh[i].y;
+            fs += a * bs[i].y;
+            fa += a;
+            let en = front.entry(e.patch).or_default();
+            en.0 += a * (bh[i].y - bs[i].y);
+            en.1 += a;
+            en.2 += a * bh[i].y;
+            en.3 += a * bs[i].y;
+        }
+    }
+    println!("front area {fa:.4e} power h {fh:.4e} s {fs:.4e} ({:+.2} %)", 100.0 * (fh / fs - 1.0));
+    println!("back  area {ba:.4e} power h {bkh:.4e} s {bks:.4e} ({:+.2} %)", 100.0 * (bkh / bks - 1.0));
+    let mut v: Vec<_> = by_poly.into_iter().collect();
+    v.sort_by(|a, b| b.1 .0.total_cmp(&a.1 .0));
+    let mut acc = 0.0;
+    for (k, (poly, (ex, a, ph, ps))) in v.iter().enumerate() {
+        acc += ex;
+        if k < 40 {
+            let p = &h.scene.polygons[*poly as usize];
+            println!(
+                "excess {ex:.3e} (cum {:.1} %) area {a:.1} h {:.4} s {:.4} n {:.2?} c {:.1?} {:?}",
+                100.0 * acc / (bkh - bks),
+                ph / a,
+                ps / a,
+                p.normal,
+                p.centroid(),
+                p.loc
+            );
+        }
+    }
+    let mut v: Vec<_> = front.into_iter().collect();
+    v.sort_by(|a, b| a.1 .0.total_cmp(&b.1 .0));
+    for (poly, (ex, a, ph, ps)) in v.iter().take(25) {
+        let p = &h.scene.polygons[*poly as usize];
+        println!(
+            "front deficit {ex:.3e} area {a:.1} h {:.4} s {:.4} ({:+.1} %) n {:.2?} c {:.1?} line {:?}",
+            ph / a,
+            ps / a,
+            100.0 * (ph / ps - 1.0),
+            p.normal,
+            p.centroid(),
+            p.loc.as_ref().and_then(|l| l.line)
+        );
+    }
+}
+
+/// Diagnostic (ignored): the links of a few elements of one polygon (env `LINE`, its OBJ
+/// line; default the conference ceiling; `PICKS` elements, `RAYS` rays each; `WHY=1`
+/// prints where the tree stops linking the largest unlinked hits) against Monte Carlo
+/// gathering of the same solution:
+/// per link source, `f · B̃_S` against the mean of `B` over cosine-weighted rays that land
+/// in `S` (emitters left out on both sides), and the rays that land in no link's source.
+#[test]
+#[ignore]
+fn link_truth() {
+    use radiosity::transport::hierarchical::Link;
+    let Some(path) = common::shared("scenes/conference/conference-lit.toml") else {
+        return;
+    };
+    let line: usize = std::env::var("LINE").ok().and_then(|x| x.parse().ok()).unwrap_or(194462);
+    let picks: usize = std::env::var("PICKS").ok().and_then(|x| x.parse().ok()).unwrap_or(6);
+    let rays_n: usize = std::env::var("RAYS").ok().and_then(|x| x.parse().ok()).unwrap_or(40000);
+    let scene = radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    let sol = solve_scene(scene, &hierarchical(), &NoProgress).unwrap();
+    let h = sol.transport.as_ref().unwrap().hierarchy().unwrap();
+    let tree = &h.tree;
+    let b = &sol.solution.radiosity;
+    let (_, em) = radiosity::pipeline::element_materials(&sol.scene, &sol.mesh);
+    let locator = radiosity::mesh::Locator::new(&sol.mesh);
+    let cands: Vec<usize> = (0..sol.mesh.len())
+        .filter(|&i| {
+            let p = &sol.scene.polygons[sol.mesh.elements[i].patch as usize];
+            p.loc.as_ref().and_then(|l| l.line) == Some(line) && sol.receivers.open_fraction[i] >= 1.0
+        })
+        .collect();
+    println!("{} candidate elements on line {line}", cands.len());
+    // The value a link reads from its source (as the operator does, without the pull).
+    let read = |s: u32, dir: [f32; 4]| -> f64 {
+        let nd = &tree.nodes[s as usize];
+        let (mut sum, mut nb, mut hi) = (0.0, DVec3::ZERO, 0.0f64);
+        for slot in nd.first..nd.first + nd.count {
+            let e = tree.order[slot as usize] as usize;
+            let leaf = &tree.nodes[tree.leaf_of[e] as usize];
+            let x = b[e].y;
+            hi = hi.max(x);
+            sum += x * leaf.area as f64;
+            nb += leaf.n_sum.as_dvec3() * x;
+        }
+        let mean = if nd.area > 0.0 { sum / nd.area as f64 } else { 0.0 };
+        if dir == Link::MEAN {
+            mean
+        } else {
+            (mean * dir[0] as f64 + DVec3::new(dir[1] as f64, dir[2] as f64, dir[3] as f64).dot(nb)).clamp(0.0, hi)
+        }
+    };
+    let mut rng = 12345u64;
+    let mut rnd = || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut tot_mc, mut tot_l, mut tot_miss) = (0.0, 0.0, 0.0);
+    let (mut cl_mc, mut cl_l, mut sf_mc, mut sf_l) = (0.0, 0.0, 0.0, 0.0);
+    let (mut fs_l, mut fs_m, mut fc_l, mut fc_m) = (0.0, 0.0, 0.0, 0.0);
+    let step = (cands.len() / picks.max(1)).max(1);
+    for &i in cands.iter().step_by(step).take(picks) {
+        let leaf = tree.leaf_of[i];
+        let e = &sol.mesh.elements[i];
+        // Links of every ancestor: (source, contribution).
+        let mut links: Vec<(u32, f64, f64, f64, f64)> = Vec::new(); // source, link value, mc sum, link factor, mc factor
+        let mut k = 0u32;
+        let c_leaf = tree.nodes[leaf as usize].centroid.as_dvec3();
+        loop {
+            let nd = &tree.nodes[k as usize];
+            for (s, f, g, dir) in h.links_full(k) {
+                let src = read(s, dir);
+                let gv = DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64);
+                let fac = if nd.surface {
+                    f as f64 + if nd.is_leaf() { 0.0 } else { gv.dot(c_leaf - nd.centroid.as_dvec3()) }
+                } else {
+                    f as f64 * e.normal.dot(gv).max(0.0)
+                };
+                links.push((s, fac * src, 0.0, fac, 0.0));
+            }
+            if k == leaf {
+                break;
+            }
+            k = *nd.child.iter().find(|&&c| tree.contains(c, leaf)).unwrap();
+        }
+        let scale = h.link_scale()[i] as f64;
+        let (t, bb) = radiosity::sampling::basis(e.normal);
+        let (mut mc, mut miss, mut emitted) = (0.0, 0.0, 0.0);
+        let mut miss_where: std::collections::HashMap<usize, f64> = Default::default();
+        for _ in 0..rays_n {
+            let p = e.point(&sol.mesh.positions, rnd(), rnd()) + e.normal * 1e-4;
+            let d = radiosity::sampling::cosine_hemisphere(rnd(), rnd());
+            let dir = (t * d.x + bb * d.y + e.normal * d.z).as_vec3();
+            let Some((hit, poly)) = sol.rays.closest_facing(p.as_vec3(), dir, f32::INFINITY, Some(e.patch)) else {
+                continue;
+            };
+            if sol.rays.normal_of(poly).dot(dir) >= 0.0 {
+                continue; // a back face: absorbs in the operator's terms
+            }
+            let hit_pt = p + dir.as_dvec3() * hit.t as f64;
+            let j = locator.locate(&sol.mesh, poly, hit_pt) as usize;
+            if em[j].y > 0.0 {
+                emitted += 1.0;
+                continue;
+            }
+            let v = b[j].y / rays_n as f64;
+            mc += v;
+            let lj = tree.leaf_of[j];
+            match links.iter_mut().find(|l| tree.contains(l.0, lj)) {
+                Some(l) => {
+                    l.2 += v;
+                    l.4 += 1.0 / rays_n as f64;
+                }
+                None => {
+                    if std::env::var("WHY").is_ok() && miss_where.values().sum::<f64>() < 3.0 * v {
+                        // The deepest ancestor of j below which some link source lies, and
+                        // j's branch there.
+                        let mut q = 0u32;
+                        loop {
+                            let nd = &tree.nodes[q as usize];
+                            if nd.is_leaf() {
+                                break;
+                            }
+                            let c = *nd.child.iter().find(|&&c| tree.contains(c, lj)).unwrap();
+                            if !links.iter().any(|l| tree.contains(c, l.0) || tree.contains(l.0, c)) {
+                                let other = nd.child[0] + nd.child[1] - c;
+                                let (nc, no) = (&tree.nodes[c as usize], &tree.nodes[other as usize]);
+                                println!(
+                                    "   unlinked hit {j} (B {:.3}) at {:.0?}: parent {q} surface {} size {:.0}; its branch {c} surface {} size {:.0} area {:.0} count {} c {:.0?} n {:.2?}; sibling {other} surface {} size {:.0} c {:.0?}",
+                                    b[j].y, hit_pt, nd.surface, nd.size(), nc.surface, nc.size(), nc.area, nc.count, nc.centroid, nc.normal(), no.surface, no.size(), no.centroid
+                                );
+                                break;
+                            }
+                            q = c;
+                        }
+                    }
+                    miss += v;
+                    *miss_where.entry(sol.scene.polygons[poly as usize].loc.as_ref().and_then(|l| l.line).unwrap_or(0)).or_default() += v;
+                }
+            }
+        }
+        let lsum: f64 = links.iter().map(|l| l.1).sum::<f64>() * scale;
+        println!(
+            "element {i} at {:.1?}: links {lsum:.4} (scale {scale:.3}) mc {mc:.4} ({:+.1} %), unlinked hits {miss:.4}, emitters {:.3}, {} links",
+            e.centroid,
+            100.0 * (lsum / mc - 1.0),
+            emitted / rays_n as f64,
+            links.len()
+        );
+        let mut mw: Vec<_> = miss_where.into_iter().collect();
+        mw.sort_by(|a, b| b.1.total_cmp(&a.1));
+        println!("   unlinked by line: {:?}", &mw[..mw.len().min(5)]);
+        tot_mc += mc;
+        tot_l += lsum;
+        tot_miss += miss;
+        for l in &links {
+            if tree.nodes[l.0 as usize].surface {
+                fs_l += l.3 * scale;
+                fs_m += l.4;
+            } else {
+                fc_l += l.3 * scale;
+                fc_m += l.4;
+            }
+        }
+        let mut by: Vec<_> = links.iter().map(|l| (l.0, l.1 * scale, l.2)).collect();
+        by.sort_by(|a, b| (b.2 - b.1).abs().total_cmp(&(a.2 - a.1).abs()));
+        for (s, l, m) in by.iter().take(6) {
+            let ns = &tree.nodes[*s as usize];
+            println!(
+                "   src {s} surface {} count {} size {:.0} dist {:.0}: link {l:.5} mc {m:.5}",
+                ns.surface,
+                ns.count,
+                ns.size(),
+                (ns.centroid.as_dvec3() - e.centroid).length()
+            );
+        }
+        for (s, l, m) in &by {
+            if tree.nodes[*s as usize].surface {
+                sf_l += l;
+                sf_mc += m;
+            } else {
+                cl_l += l;
+                cl_mc += m;
+            }
+        }
+    }
+    println!(
+        "total: links {tot_l:.4} mc {tot_mc:.4} ({:+.2} %), unlinked {tot_miss:.4}; surface sources link {sf_l:.4} mc {sf_mc:.4}, cluster sources link {cl_l:.4} mc {cl_mc:.4}",
+        100.0 * (tot_l / tot_mc - 1.0)
+    );
+    println!("factors: surface sources link {fs_l:.4} mc {fs_m:.4}; cluster sources link {fc_l:.4} mc {fc_m:.4}");
 }

@@ -88,6 +88,10 @@ pub struct Node {
     pub centroid: Vec3,
     /// `Σ A_j n_j` over its elements (for a surface node: area × normal).
     pub n_sum: Vec3,
+    /// Exposed area `Σ A_j o_j`, with `o_j` the element's exposure ([`Tree::set_exposure`]).
+    pub area_x: f32,
+    /// Exposed normal sum `Σ A_j o_j n_j`.
+    pub n_x: Vec3,
     /// True when all its elements lie in one plane and face one way.
     pub surface: bool,
     /// Depth below the root (0).
@@ -132,6 +136,10 @@ pub struct Tree {
     pub normal_start: Vec<u32>,
     /// The bins' area-weighted normal sums.
     pub normal_bins: Vec<Vec3>,
+    /// The same over the exposed areas ([`Tree::set_exposure`]).
+    pub normal_bins_exposed: Vec<Vec3>,
+    /// Prefix sums of the exposed areas in tree order, for sampling a cluster by them.
+    pub exposed_prefix: Vec<f64>,
 }
 
 /// Elements of one plane share a key: normal and offset quantised.
@@ -175,6 +183,8 @@ impl Tree {
             area: 0.0,
             centroid: Vec3::ZERO,
             n_sum: Vec3::ZERO,
+            area_x: 0.0,
+            n_x: Vec3::ZERO,
             surface: false,
             depth: 0,
         };
@@ -269,6 +279,8 @@ impl Tree {
                 node.area = a as f32;
                 node.centroid = e.centroid.as_vec3();
                 node.n_sum = (nn * a).as_vec3();
+                node.area_x = node.area;
+                node.n_x = node.n_sum;
             } else {
                 let (a, b) = (nodes[nd.child[0] as usize], nodes[nd.child[1] as usize]);
                 let area = a.area + b.area;
@@ -282,6 +294,8 @@ impl Tree {
                     0.5 * (a.centroid + b.centroid)
                 };
                 node.n_sum = a.n_sum + b.n_sum;
+                node.area_x = area;
+                node.n_x = node.n_sum;
             }
         }
         let mut area_prefix = Vec::with_capacity(n + 1);
@@ -292,8 +306,52 @@ impl Tree {
             area_prefix.push(acc);
         }
         self.leaf_of = leaf_of;
+        self.exposed_prefix = area_prefix.clone();
         self.area_prefix = area_prefix;
         self.bin_normals();
+    }
+
+    /// Sets every element's *exposure* `o_j ∈ [0, 1]` (indexed by element): the share of
+    /// its hemisphere that reaches beyond its own neighbourhood (see
+    /// [`crate::form_factor::hierarchical`]). Clusters are seen, and receive, through their
+    /// exposed area `Σ A_j o_j`: a face inside a closed slab, or the back copy of a wall
+    /// facing into a cavity, faces a far node but neither sends to it nor receives from it.
+    /// Surface nodes' own factors are unchanged (their visibility comes from rays).
+    pub fn set_exposure(&mut self, exposure: &[f32]) {
+        let nodes = &mut self.nodes;
+        for k in (0..nodes.len()).rev() {
+            let nd = nodes[k];
+            if nd.is_leaf() {
+                let o = exposure[self.order[nd.first as usize] as usize].clamp(0.0, 1.0);
+                nodes[k].area_x = nd.area * o;
+                nodes[k].n_x = nd.n_sum * o;
+            } else {
+                let (a, b) = (nodes[nd.child[0] as usize], nodes[nd.child[1] as usize]);
+                nodes[k].area_x = a.area_x + b.area_x;
+                nodes[k].n_x = a.n_x + b.n_x;
+            }
+        }
+        let mut acc = 0.0;
+        let mut prefix = Vec::with_capacity(self.order.len() + 1);
+        prefix.push(0.0);
+        for &e in &self.order {
+            let leaf = &self.nodes[self.leaf_of[e as usize] as usize];
+            acc += leaf.area_x as f64;
+            prefix.push(acc);
+        }
+        self.exposed_prefix = prefix;
+        self.bin_normals();
+    }
+
+    /// The exposure of node `k`: its exposed share of its open area (1 without exposure).
+    #[inline]
+    pub fn exposure(&self, k: u32) -> f64 {
+        let nd = &self.nodes[k as usize];
+        if nd.area > 0.0 {
+            (nd.area_x / nd.area) as f64
+        } else {
+            0.0
+        }
     }
 
     /// The normal distribution of every cluster node (see [`Tree::normal_bins`]), bottom-up:
@@ -301,8 +359,8 @@ impl Tree {
     fn bin_normals(&mut self) {
         let nodes = &self.nodes;
         let m = nodes.len();
-        let mut lists: Vec<Vec<(u8, DVec3)>> = vec![Vec::new(); m];
-        let mut dense = [DVec3::ZERO; DIR_BINS];
+        let mut lists: Vec<Vec<(u8, DVec3, DVec3)>> = vec![Vec::new(); m];
+        let mut dense = [(DVec3::ZERO, DVec3::ZERO); DIR_BINS];
         let mut used: Vec<u8> = Vec::with_capacity(DIR_BINS);
         for k in (0..m).rev() {
             let nd = &nodes[k];
@@ -312,34 +370,41 @@ impl Tree {
             used.clear();
             for c in nd.child {
                 let cn = &nodes[c as usize];
-                let mut add = |b: u8, v: DVec3| {
-                    if dense[b as usize] == DVec3::ZERO {
-                        used.push(b);
-                    }
-                    dense[b as usize] += v;
+                let mut add = |b: u8, v: DVec3, x: DVec3| {
+                    used.push(b);
+                    dense[b as usize].0 += v;
+                    dense[b as usize].1 += x;
                 };
                 if cn.surface {
                     let n = cn.n_sum.as_dvec3();
-                    add(dir_bin(n.normalize_or_zero()) as u8, n);
+                    add(dir_bin(n.normalize_or_zero()) as u8, n, cn.n_x.as_dvec3());
                 } else {
-                    for &(b, v) in &lists[c as usize] {
-                        add(b, v);
+                    for &(b, v, x) in &lists[c as usize] {
+                        add(b, v, x);
                     }
                 }
             }
             used.sort_unstable();
             used.dedup();
-            lists[k] = used.iter().map(|&b| (b, std::mem::take(&mut dense[b as usize]))).collect();
+            lists[k] = used
+                .iter()
+                .map(|&b| {
+                    let (v, x) = std::mem::take(&mut dense[b as usize]);
+                    (b, v, x)
+                })
+                .collect();
         }
         let mut start = Vec::with_capacity(m + 1);
         start.push(0u32);
-        let mut bins = Vec::new();
+        let (mut bins, mut exposed) = (Vec::new(), Vec::new());
         for l in &lists {
-            bins.extend(l.iter().map(|&(_, v)| v.as_vec3()));
+            bins.extend(l.iter().map(|&(_, v, _)| v.as_vec3()));
+            exposed.extend(l.iter().map(|&(_, _, x)| x.as_vec3()));
             start.push(bins.len() as u32);
         }
         self.normal_start = start;
         self.normal_bins = bins;
+        self.normal_bins_exposed = exposed;
     }
 
     /// `Σ_j A_j max(0, n_j·d)`: the projected area of node `k`'s front faces towards the unit
@@ -348,14 +413,17 @@ impl Tree {
     /// estimate it replaced, the Cauchy–Schwarz bound from the first two normal moments,
     /// overstated a desk's top by ~20 % where its legs and two-sided copies mix normals.)
     /// [`Tree::front_area`] is the exact sum.
+    /// With `exposed`, a cluster's exposed faces only ([`Tree::set_exposure`]; a surface
+    /// node's projected area is its own either way).
     #[inline]
-    pub fn projected_area(&self, k: u32, d: DVec3) -> f64 {
+    pub fn projected_area(&self, k: u32, d: DVec3, exposed: bool) -> f64 {
         let nd = &self.nodes[k as usize];
         if nd.surface {
             return nd.n_sum.as_dvec3().dot(d).max(0.0);
         }
         let (a, b) = (self.normal_start[k as usize] as usize, self.normal_start[k as usize + 1] as usize);
-        self.normal_bins[a..b].iter().map(|m| m.as_dvec3().dot(d).max(0.0)).sum()
+        let bins = if exposed { &self.normal_bins_exposed } else { &self.normal_bins };
+        bins[a..b].iter().map(|m| m.as_dvec3().dot(d).max(0.0)).sum()
     }
 
     /// True when node `a` holds every element of node `b` (`b` is `a` or below it).
@@ -370,13 +438,13 @@ impl Tree {
     /// the topmost surface nodes below `k` (each one plane, so exact; what the push of a
     /// cluster receiver hands out per unit of a link from `d`). [`Tree::projected_area`] is
     /// the constant-time estimate.
-    pub fn front_area(&self, k: u32, d: DVec3) -> f64 {
+    pub fn front_area(&self, k: u32, d: DVec3, exposed: bool) -> f64 {
         let mut total = 0.0;
         let mut stack = vec![k];
         while let Some(k) = stack.pop() {
             let nd = &self.nodes[k as usize];
             if nd.surface {
-                total += nd.n_sum.as_dvec3().dot(d).max(0.0);
+                total += if exposed { nd.n_x } else { nd.n_sum }.as_dvec3().dot(d).max(0.0);
             } else {
                 stack.extend(nd.child.iter().filter(|&&c| c != NONE));
             }
@@ -391,6 +459,21 @@ impl Tree {
         let (a, b) = (nd.first as usize, (nd.first + nd.count) as usize);
         let target = self.area_prefix[a] + u * (self.area_prefix[b] - self.area_prefix[a]);
         let slot = self.area_prefix[a + 1..=b].partition_point(|&p| p <= target);
+        self.order[(a + slot).min(b - 1)]
+    }
+
+    /// The element at fraction `u ∈ [0, 1)` of node `k`'s exposed area (area-uniform for a
+    /// surface node; falls back to the open area where nothing is exposed).
+    #[inline]
+    pub fn element_at_exposed(&self, k: u32, u: f64) -> u32 {
+        let nd = &self.nodes[k as usize];
+        if nd.surface || !(nd.area_x > 0.0) {
+            return self.element_at(k, u);
+        }
+        let (a, b) = (nd.first as usize, (nd.first + nd.count) as usize);
+        let p = &self.exposed_prefix;
+        let target = p[a] + u * (p[b] - p[a]);
+        let slot = p[a + 1..=b].partition_point(|&x| x <= target);
         self.order[(a + slot).min(b - 1)]
     }
 
@@ -478,6 +561,11 @@ pub struct HierarchyStats {
     /// Elements whose links were scaled (their group's row sum lay outside the closure's
     /// confidence interval).
     pub closure_fitted: u64,
+    /// Elements whose links fell far short of their closure and gather by rays instead
+    /// ([`Hierarchy::set_ray_rows`]).
+    pub ray_rows: u64,
+    /// Entries of those rows.
+    pub ray_row_entries: u64,
 }
 
 /// The measured closure of every element and the groups it is fitted over
@@ -499,7 +587,7 @@ pub struct Closure {
 pub const CLOSURE_Z: f64 = 2.0;
 
 /// The Wilson score interval for a fraction `p` of `n` trials at `z` standard deviations.
-fn wilson(p: f64, n: f64, z: f64) -> (f64, f64) {
+pub fn wilson(p: f64, n: f64, z: f64) -> (f64, f64) {
     let z2 = z * z;
     let centre = (p + z2 / (2.0 * n)) / (1.0 + z2 / n);
     let half = z / (1.0 + z2 / n) * (p * (1.0 - p) / n + z2 / (4.0 * n * n)).sqrt();
@@ -527,6 +615,11 @@ pub struct Link {
     /// plain mean, for a surface node). Stored only for cluster sources, and `g` only for
     /// receivers above the leaves: the operator keeps about 16 bytes per link.
     pub dir: [f32; 4],
+    /// A near-field link (two nodes at the minimum size, not well separated, its factor
+    /// integrated with rays): clusters send and receive through all their faces. A far
+    /// link reaches them through their exposed faces ([`Tree::set_exposure`]). Stored as
+    /// the sign of the factor.
+    pub near: bool,
 }
 
 impl Link {
@@ -540,14 +633,15 @@ impl Link {
     /// seen from the ceiling then gives its lit top's radiosity, not the mean of top and
     /// dark underside (the classroom ceiling was 27 % dark without it). `p` is its projected
     /// area towards `d` ([`Tree::projected_area`]).
-    pub fn directional(s: &Node, p: f64, d: DVec3) -> [f32; 4] {
+    pub fn directional(s: &Node, p: f64, d: DVec3, near: bool) -> [f32; 4] {
+        let (area, n) = if near { (s.area, s.n_sum) } else { (s.area_x, s.n_x) };
         // Seen almost edge-on the reading divides by a vanishing projected area: rounding
         // of the f32 coefficients would dominate (raw row sums of 2 000 in the classroom).
         // Such links carry almost nothing (their factor has the same projected area).
-        if !(p > 0.01 * s.area as f64) {
+        if !(p > 0.01 * area as f64) {
             return Link::MEAN;
         }
-        let half_abs = p - 0.5 * s.n_sum.as_dvec3().dot(d);
+        let half_abs = p - 0.5 * n.as_dvec3().dot(d);
         let b = 0.5 * d / p;
         [(half_abs / p) as f32, b.x as f32, b.y as f32, b.z as f32]
     }
@@ -580,6 +674,9 @@ pub struct Hierarchy {
     /// Exact factors from every element to the emitting elements, when emitted light
     /// travels outside the links (see [`crate::form_factor::hierarchical::Options::direct_columns`]).
     direct: Option<SparseRows>,
+    /// Ray-traced rows of the elements that the links serve badly (see
+    /// [`Hierarchy::set_ray_rows`]): their links are switched off.
+    ray_rows: Option<SparseRows>,
     /// What it holds.
     pub stats: HierarchyStats,
 }
@@ -590,7 +687,11 @@ const PARALLEL_WALK: usize = 4096;
 /// What links read from their sources during one product (pulled per node).
 struct Sources<'a> {
     mean: &'a [Rgb],
+    /// `Σ A_j o_j B_j`, the exposed sum (a cluster is read through its exposed faces).
+    sx: &'a [Rgb],
     nb: &'a [[DVec3; 3]],
+    /// `Σ A_j o_j B_j n_j` (far links' directional readings; `nb` is `Σ A_j B_j n_j`).
+    nbx: &'a [[DVec3; 3]],
     hi: &'a [Rgb],
 }
 
@@ -666,7 +767,7 @@ impl Hierarchy {
                 let p = *fill as usize;
                 *fill += 1;
                 link_src[p] = l.s;
-                link_f[p] = l.f;
+                link_f[p] = if l.near { -l.f } else { l.f };
                 if g_base[k] != NONE {
                     link_g[g_base[k] as usize + p - link_start[k] as usize] = l.g;
                 }
@@ -694,12 +795,44 @@ impl Hierarchy {
             link_scale: vec![1.0; n],
             scale: vec![1.0; n],
             direct,
+            ray_rows: None,
             stats,
         };
         h.stats.direct_entries = h.direct.as_ref().map_or(0, |d| d.nnz() as u64);
         if let Some(c) = closure {
             h.fit_closure(&c);
         }
+        h.guard_rows();
+        h
+    }
+
+    /// Gives the elements in `rows` (element, its factors to elements) rows traced by rays
+    /// in place of their links: elements in crevices and behind other parts of a cluster
+    /// (a face a few units from a wall, behind a mounted board) that no link reaches from
+    /// their side, so their rows sum far below their measured closure, which the closure
+    /// fit cannot mend by scaling. Light from the direct columns still adds. Then the row
+    /// guard is measured again.
+    pub fn set_ray_rows(&mut self, rows: Vec<(u32, Vec<(u32, f32)>)>) {
+        if rows.is_empty() {
+            return;
+        }
+        let n = self.len();
+        let mut full = vec![Vec::new(); n];
+        for (i, r) in rows {
+            self.link_scale[i as usize] = 0.0;
+            full[i as usize] = r;
+        }
+        let rr = SparseRows::from_rows(full);
+        self.stats.ray_rows = (0..n).filter(|&i| self.link_scale[i] == 0.0).count() as u64;
+        self.stats.ray_row_entries = rr.nnz() as u64;
+        self.ray_rows = Some(rr);
+        self.scale = vec![1.0; n];
+        self.guard_rows();
+    }
+
+    /// Measures every row sum and scales rows above one to one (the row guard).
+    fn guard_rows(&mut self) {
+        let h = self;
         // Row sums: the product with x = 1 (every node's mean is 1).
         let sums = h.row_sums();
         let mut scaled = 0;
@@ -719,7 +852,6 @@ impl Hierarchy {
         h.stats.rows_scaled = scaled;
         h.stats.max_row_sum = max_sum;
         h.stats.memory_bytes = h.memory_bytes() as u64;
-        h
     }
 
     /// Fits what the links bring to the measured closure, group by group (see [`Closure`]).
@@ -812,6 +944,8 @@ impl Hierarchy {
         // Pull: area-weighted means and N_B = Σ A B n (per channel), bottom-up.
         let mut mean = vec![Rgb::ZERO; m];
         let mut nb = vec![[DVec3::ZERO; 3]; m];
+        let mut nbx = vec![[DVec3::ZERO; 3]; m];
+        let mut sx = vec![Rgb::ZERO; m];
         // And the largest value below each node, which bounds a directional reading.
         let mut hi = vec![Rgb::ZERO; m];
         for k in (0..m).rev() {
@@ -820,11 +954,16 @@ impl Hierarchy {
                 let v = x[self.tree.order[nd.first as usize] as usize];
                 let n = nd.n_sum.as_dvec3();
                 nb[k] = [n * v.x, n * v.y, n * v.z];
+                let n = nd.n_x.as_dvec3();
+                nbx[k] = [n * v.x, n * v.y, n * v.z];
+                sx[k] = v * nd.area_x as f64;
                 hi[k] = v;
                 v
             } else {
                 let (c0, c1) = (nd.child[0] as usize, nd.child[1] as usize);
                 nb[k] = [nb[c0][0] + nb[c1][0], nb[c0][1] + nb[c1][1], nb[c0][2] + nb[c1][2]];
+                nbx[k] = [nbx[c0][0] + nbx[c1][0], nbx[c0][1] + nbx[c1][1], nbx[c0][2] + nbx[c1][2]];
+                sx[k] = sx[c0] + sx[c1];
                 hi[k] = hi[c0].max(hi[c1]);
                 let (a, b) = (&nodes[nd.child[0] as usize], &nodes[nd.child[1] as usize]);
                 let area = a.area as f64 + b.area as f64;
@@ -840,6 +979,7 @@ impl Hierarchy {
         // A cluster receiver holds its irradiance as a function of the normal instead,
         // `s + L·n + nᵀQn` per channel (s in the scalar, L in the gradient slots, Q here).
         let mut g: Vec<(Rgb, [DVec3; 3])> = vec![(Rgb::ZERO, [DVec3::ZERO; 3]); m];
+        let src = Sources { mean: &mean, sx: &sx, nb: &nb, nbx: &nbx, hi: &hi };
         g.par_iter_mut().enumerate().with_min_len(256).for_each(|(k, gk)| {
             if !nodes[k].surface {
                 return; // cluster receivers below
@@ -848,8 +988,8 @@ impl Hierarchy {
             let mut acc = Rgb::ZERO;
             let mut grad = [DVec3::ZERO; 3];
             for t in a..b {
-                let src = self.source_value(k, t, &mean, &nb, &hi);
-                acc += src * self.link_f[t] as f64;
+                let src = self.source_value(k, t, &src);
+                acc += src * self.factor(t);
                 let gl = self.vec_of(k, t);
                 if gl != [0.0; 3] {
                     let gv = Vec3::from_array(gl).as_dvec3();
@@ -864,8 +1004,7 @@ impl Hierarchy {
         // (each path's bins summed on the way) and evaluated at the normal of each surface
         // child (see [`DIR_BIN_SIDE`]).
         if m > 0 && !nodes[0].surface {
-            let mut bins = vec![[DVec3::ZERO; 3]; DIR_BINS];
-            let src = Sources { mean: &mean, nb: &nb, hi: &hi };
+            let mut bins = vec![[DVec3::ZERO; 3]; 2 * DIR_BINS];
             let mut lit = Vec::new();
             self.walk_clusters(0, &mut bins, 0, &src, &mut lit);
             for (c, v) in lit {
@@ -905,6 +1044,9 @@ impl Hierarchy {
             if let Some(d) = self.direct.as_ref().filter(|_| direct) {
                 *ye += d.gather_row(e, x);
             }
+            if let Some(r) = &self.ray_rows {
+                *ye += r.gather_row(e, x);
+            }
             if guard {
                 *ye = (*ye * self.scale[e] as f64).min(top);
             }
@@ -922,9 +1064,10 @@ impl Hierarchy {
         // The bins this node's links change, with their old values (restored exactly).
         let mut saved: Vec<(usize, [DVec3; 3])> = Vec::with_capacity(b - a);
         for t in a..b {
-            let w = self.source_value(k, t, src.mean, src.nb, src.hi) * self.link_f[t] as f64;
+            let w = self.source_value(k, t, src) * self.factor(t);
             let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
-            let bin = dir_bin(d);
+            // Near links in the second half: they reach every face, far ones the exposed.
+            let bin = dir_bin(d) + DIR_BINS * self.is_near(t) as usize;
             saved.push((bin, bins[bin]));
             for c in 0..3 {
                 bins[bin][c] += d * w[c];
@@ -938,13 +1081,16 @@ impl Hierarchy {
                 continue;
             }
             let n = nodes[c as usize].normal();
-            let mut v = [0.0; 3];
-            for bin in bins.iter() {
-                for (vc, bc) in v.iter_mut().zip(bin) {
-                    *vc += n.dot(*bc).max(0.0);
+            let take = |bins: &[[DVec3; 3]]| {
+                let mut v = Rgb::ZERO;
+                for bin in bins {
+                    v += Rgb::new(n.dot(bin[0]).max(0.0), n.dot(bin[1]).max(0.0), n.dot(bin[2]).max(0.0));
                 }
-            }
-            out.push((c, Rgb::new(v[0], v[1], v[2])));
+                v
+            };
+            // Only its exposed part takes light that reaches the cluster from afar.
+            let (far, near) = bins.split_at(DIR_BINS);
+            out.push((c, take(far) * self.tree.exposure(c) + take(near)));
         }
         let [c0, c1] = nd.child;
         if is_cluster(c0) && is_cluster(c1) && nd.count as usize >= PARALLEL_WALK {
@@ -963,6 +1109,18 @@ impl Hierarchy {
         for (bin, old) in saved.into_iter().rev() {
             bins[bin] = old;
         }
+    }
+
+    /// The factor of link `t`.
+    #[inline]
+    fn factor(&self, t: usize) -> f64 {
+        self.link_f[t].abs() as f64
+    }
+
+    /// True for a near-field link ([`Link::near`]).
+    #[inline]
+    fn is_near(&self, t: usize) -> bool {
+        self.link_f[t].is_sign_negative()
     }
 
     /// The vector of link `t` of receiver `k` (zero for a leaf receiver).
@@ -988,18 +1146,25 @@ impl Hierarchy {
     /// The radiosity link `t` reads from its source: the area-weighted mean, or for a
     /// cluster its directional reading ([`Link::directional`]).
     #[inline]
-    fn source_value(&self, k: usize, t: usize, mean: &[Rgb], nb: &[[DVec3; 3]], hi: &[Rgb]) -> Rgb {
+    fn source_value(&self, k: usize, t: usize, src: &Sources) -> Rgb {
         let s = self.link_src[t] as usize;
         let dir = self.read_of(k, t);
+        let hi = src.hi;
         if dir == Link::MEAN {
-            mean[s]
+            src.mean[s]
         } else {
+            let ax = self.tree.nodes[s].area_x as f64;
+            let (mean, nb) = if self.is_near(t) || !(ax > 0.0) {
+                (src.mean[s], src.nb)
+            } else {
+                (src.sx[s] / ax, src.nbx)
+            };
             let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
             let n = &nb[s];
             // A weighted mean of the source's radiosities in truth; the first-order reading
             // can overshoot (normals that cancel, as on two-sided pairs) and is held to
             // the range they span, so that no link amplifies.
-            (mean[s] * dir[0] as f64 + Rgb::new(beta.dot(n[0]), beta.dot(n[1]), beta.dot(n[2])))
+            (mean * dir[0] as f64 + Rgb::new(beta.dot(n[0]), beta.dot(n[1]), beta.dot(n[2])))
                 .max(Rgb::ZERO)
                 .min(hi[s])
         }
@@ -1018,15 +1183,19 @@ impl Hierarchy {
             for t in a..b {
                 let s = &nodes[self.link_src[t] as usize];
                 // The source's value from its leaves directly (no pull).
-                let (mut sum, mut nb, mut hi) = (Rgb::ZERO, [DVec3::ZERO; 3], Rgb::ZERO);
+                let (mut sum, mut sum_x, mut nb, mut nbx, mut hi) =
+                    (Rgb::ZERO, Rgb::ZERO, [DVec3::ZERO; 3], [DVec3::ZERO; 3], Rgb::ZERO);
                 for slot in s.first..s.first + s.count {
                     let e = self.tree.order[slot as usize] as usize;
                     let leaf = &nodes[self.tree.leaf_of[e] as usize];
                     let v = x[e];
                     hi = hi.max(v);
                     sum += v * leaf.area as f64;
+                    sum_x += v * leaf.area_x as f64;
                     let n = leaf.n_sum.as_dvec3();
                     nb = [nb[0] + n * v.x, nb[1] + n * v.y, nb[2] + n * v.z];
+                    let n = leaf.n_x.as_dvec3();
+                    nbx = [nbx[0] + n * v.x, nbx[1] + n * v.y, nbx[2] + n * v.z];
                 }
                 let mean = if s.area > 0.0 { sum / s.area as f64 } else { Rgb::ZERO };
                 let dir = self.read_of(k, t);
@@ -1034,17 +1203,18 @@ impl Hierarchy {
                 let src = if dir == Link::MEAN {
                     mean
                 } else {
+                    let (mean, nb) = if self.is_near(t) || !(s.area_x > 0.0) { (mean, nb) } else { (sum_x / s.area_x as f64, nbx) };
                     (mean * dir[0] as f64 + Rgb::new(beta.dot(nb[0]), beta.dot(nb[1]), beta.dot(nb[2])))
                         .max(Rgb::ZERO)
                         .min(hi)
                 };
-                let w = self.link_f[t] as f64 * crate::luminance(src);
+                let w = self.factor(t) * crate::luminance(src);
                 if nodes[k].surface {
                     total += nodes[k].area as f64 * w;
                 } else {
                     // A cluster receiver: each leaf by its normal.
                     let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
-                    total += w * self.tree.front_area(k as u32, d);
+                    total += w * self.tree.front_area(k as u32, d, !self.is_near(t));
                 }
             }
         }
@@ -1072,13 +1242,13 @@ impl Hierarchy {
     pub fn links_full(&self, k: u32) -> impl Iterator<Item = (u32, f32, [f32; 3], [f32; 4])> + '_ {
         let k = k as usize;
         (self.link_start[k] as usize..self.link_start[k + 1] as usize)
-            .map(move |t| (self.link_src[t], self.link_f[t], self.vec_of(k, t), self.read_of(k, t)))
+            .map(move |t| (self.link_src[t], self.link_f[t].abs(), self.vec_of(k, t), self.read_of(k, t)))
     }
 
     /// Links received by node `k`: (source node, factor).
     pub fn links(&self, k: u32) -> impl Iterator<Item = (u32, f32)> + '_ {
         let (a, b) = (self.link_start[k as usize] as usize, self.link_start[k as usize + 1] as usize);
-        self.link_src[a..b].iter().copied().zip(self.link_f[a..b].iter().copied())
+        self.link_src[a..b].iter().copied().zip(self.link_f[a..b].iter().map(|f| f.abs()))
     }
 }
 
@@ -1095,9 +1265,9 @@ impl Transport for Hierarchy {
         let t = &self.tree;
         t.nodes.len() * std::mem::size_of::<Node>()
             + (t.order.len() + t.leaf_of.len()) * 4
-            + t.area_prefix.len() * 8
+            + (t.area_prefix.len() + t.exposed_prefix.len()) * 8
             + t.normal_start.len() * 4
-            + t.normal_bins.len() * 12
+            + (t.normal_bins.len() + t.normal_bins_exposed.len()) * 12
             + self.link_start.len() * 4
             + self.link_src.len() * 4
             + self.link_f.len() * 4
@@ -1106,5 +1276,6 @@ impl Transport for Hierarchy {
             + (self.g_base.len() + self.dir_base.len() + self.cluster_count.len()) * 4
             + (self.scale.len() + self.link_scale.len()) * 4
             + self.direct.as_ref().map_or(0, |d| d.nnz() * 8 + (d.n() + 1) * 8)
+            + self.ray_rows.as_ref().map_or(0, |d| d.nnz() * 8 + (d.n() + 1) * 8)
     }
 }
