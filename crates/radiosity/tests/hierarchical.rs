@@ -1064,3 +1064,91 @@ fn link_truth() {
     );
     println!("factors: surface sources link {fs_l:.4} mc {fs_m:.4}; cluster sources link {fc_l:.4} mc {fc_m:.4}");
 }
+
+/// Diagnostic (ignored): how much light lands where the coverage test says nothing can
+/// (points inside closed solids): rays from the lamps of the lit conference and from
+/// open points of every surface (area-weighted), each hit tested against the open pieces
+/// of the element it lands on. Light landing on a covered piece is never reflected.
+#[test]
+#[ignore]
+fn light_on_covered_parts() {
+    let Some(path) = common::shared("scenes/conference/conference-lit.toml") else {
+        return;
+    };
+    let scene = radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    let mut s = Settings { transport: Kind::Rows, solver: Solver::StochasticJacobi, ..Default::default() };
+    s.max_elements = 2_000_000;
+    s.solve.rays = Some(200_000);
+    s.solve.max_iterations = 1;
+    let sol = solve_scene(scene, &s, &NoProgress).unwrap();
+    let mesh = &sol.mesh;
+    let locator = radiosity::mesh::Locator::new(mesh);
+    let (_, em) = radiosity::pipeline::element_materials(&sol.scene, mesh);
+    let area = sol.receivers.open_areas(mesh);
+    let mut rng = 99u64;
+    let mut rnd = || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let inside = |e: usize, p: DVec3| {
+        let n = mesh.elements[e].normal;
+        sol.receivers.open_pieces(mesh, e).iter().any(|poly| {
+            (0..poly.len()).all(|k| {
+                let (a, b) = (poly[k], poly[(k + 1) % poly.len()]);
+                n.dot((b - a).cross(p - a)) >= -1e-9 * (b - a).length_squared().max(1e-30)
+            })
+        })
+    };
+    for (label, sources) in [
+        ("lamps", (0..mesh.len()).filter(|&i| em[i].y > 0.0).collect::<Vec<_>>()),
+        ("surfaces", (0..mesh.len()).filter(|&i| em[i].y == 0.0 && area[i] > 0.0).collect::<Vec<_>>()),
+    ] {
+        let w: Vec<f64> = sources.iter().map(|&i| area[i]).collect();
+        let total: f64 = w.iter().sum();
+        let mut prefix = Vec::with_capacity(w.len());
+        let mut acc = 0.0;
+        for x in &w {
+            acc += x;
+            prefix.push(acc);
+        }
+        let n_rays = 200_000;
+        let (mut hits, mut covered, mut covered_area_hits) = (0u64, 0u64, 0.0f64);
+        let mut by_line: std::collections::HashMap<usize, u64> = Default::default();
+        for _ in 0..n_rays {
+            let k = prefix.partition_point(|&p| p < rnd() * total).min(sources.len() - 1);
+            let i = sources[k];
+            let e = &mesh.elements[i];
+            let Some((u, v)) = sol.receivers.open_cell(i, (rnd() * 64.0) as u32 % sol.receivers.open_cells[i].count_ones().max(1)) else {
+                continue;
+            };
+            let p = e.point(&mesh.positions, u + rnd() / 8.0, v + rnd() / 8.0) + e.normal * 1e-3;
+            let (t, b) = radiosity::sampling::basis(e.normal);
+            let d = radiosity::sampling::cosine_hemisphere(rnd(), rnd());
+            let dir = (t * d.x + b * d.y + e.normal * d.z).as_vec3();
+            let Some((hit, poly)) = sol.rays.closest_facing(p.as_vec3(), dir, f32::INFINITY, Some(e.patch)) else {
+                continue;
+            };
+            if sol.rays.normal_of(poly).dot(dir) >= 0.0 {
+                continue;
+            }
+            let q = p + dir.as_dvec3() * hit.t as f64;
+            let j = locator.locate(mesh, poly, q) as usize;
+            hits += 1;
+            if !inside(j, q) {
+                covered += 1;
+                covered_area_hits += 1.0 - sol.receivers.open_fraction[j];
+                *by_line.entry(sol.scene.polygons[poly as usize].loc.as_ref().and_then(|l| l.line).unwrap_or(0)).or_default() += 1;
+            }
+        }
+        let mut v: Vec<_> = by_line.into_iter().collect();
+        v.sort_by(|a, b| b.1.cmp(&a.1));
+        println!(
+            "{label}: {hits} hits, {covered} on covered parts ({:.2} %), mean covered share of those elements {:.2}; top lines {:?}",
+            100.0 * covered as f64 / hits.max(1) as f64,
+            covered_area_hits / covered.max(1) as f64,
+            &v[..v.len().min(12)]
+        );
+    }
+}

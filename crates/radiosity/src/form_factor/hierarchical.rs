@@ -519,7 +519,7 @@ pub fn link(
 const RAY_ROW_Z: f64 = 1.5;
 
 /// Rays of a traced row, in closure rays.
-const RAY_ROW_FACTOR: usize = 4;
+const RAY_ROW_FACTOR: usize = 2;
 
 /// Element `i`'s row traced by `m` rays stratified over its cosine-weighted hemisphere
 /// from its open points: the share of rays whose first hit is the front of element `j` is
