@@ -73,7 +73,7 @@
 //!   (without the fit 13.5 % of the conference room's light went missing). A row still far
 //!   short of its closure after the fit (below the lower end of its Wilson interval at
 //!   `RAY_ROW_Z`: a face a few units from a wall, behind a mounted board, that no link
-//!   reaches from its side) is traced instead: `RAY_ROW_FACTOR` × more rays, the share of
+//!   reaches from its side) is traced instead: `RAY_ROW_FACTOR` × as many rays, the share of
 //!   them landing on each element its factor (Monte Carlo form factors;
 //!   [`crate::transport::Hierarchy::set_ray_rows`]), where emitted light goes through the
 //!   direct columns or is spread (rays find concentrated lights poorly). In the conference
