@@ -66,8 +66,10 @@ pub struct SolveFlags {
     #[arg(long)]
     pub emitters_in_links: bool,
     /// Hierarchical: rays per element that measure its closure (the share of its hemisphere
-    /// that meets a surface); what its links bring is scaled to close its row to it.
-    /// 0 turns the fit off.
+    /// that meets a surface) and its exposure (the share that gets past the minimum size);
+    /// what its links bring is scaled to close its row, clusters are seen and lit from afar
+    /// through their exposed faces, and rows far short of their closure are traced by rays.
+    /// 0 turns all three off.
     #[arg(long, value_name = "N", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_CLOSURE_RAYS)]
     pub link_closure_rays: usize,
     /// Memory the form-factor rows or the hierarchical links may use (e.g. 8G, 512M):
