@@ -35,8 +35,9 @@ use crate::Rgb;
 
 /// Cells per side of each cube face in a cluster receiver's directional bins: irradiance
 /// arriving at a cluster (from links whose receiver is a cluster) is kept per bin of
-/// arrival direction as `V_b = Σ_{links in b} w · d` (per colour channel), and a surface
-/// below the cluster with normal `n` takes `Σ_b max(0, n·V_b)`: the exact clamped cosine
+/// arrival direction as `V_b = Σ_{links in b} w · d` (per colour channel; near and far
+/// links in separate bins), and a surface below the cluster with normal `n` takes
+/// `Σ_b max(0, n·V_b)`, times its exposure for far links ([`Tree::set_exposure`]): the exact clamped cosine
 /// `Σ w · max(0, n·d)` for every bin wholly above or below its horizon, so a face turned
 /// away (the back copy of a two-sided wall, a desk's underside) takes nothing and the power
 /// a link carries is what the cluster's front faces intercept. (Until 2026-12-02 a
