@@ -812,33 +812,21 @@ fn conference_back_light() {
     let (bh, bs) = (&h.solution.radiosity, &st.solution.radiosity);
     let mut by_poly: std::collections::HashMap<u32, (f64, f64, f64, f64)> = Default::default();
     let mut front: std::collections::HashMap<u32, (f64, f64, f64, f64)> = Default::default();
-    let (mut fh, mut fs, mut bkh, mut bks, mut fa, mut ba) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for i in 0..h.mesh.len() {
         let e = &h.mesh.elements[i];
-        let p = &h.scene.polygons[e.patch as usize];
+        let side = if h.scene.polygons[e.patch as usize].back_side { &mut by_poly } else { &mut front };
         let a = area[i];
-        if p.back_side {
-            bkh += a * bh[i].y;
-            bks += a * bs[i].y;
-            ba += a;
-            let en = by_poly.entry(e.patch).or_default();
-            en.0 += a * (bh[i].y - bs[i].y);
-            en.1 += a;
-            en.2 += a * bh[i].y;
-            en.3 += a * bs[i].y;
-        } else {
-            fh += a * bh[i].y;
-            fs += a * bs[i].y;
-            fa += a;
-            let en = front.entry(e.patch).or_default();
-            en.0 += a * (bh[i].y - bs[i].y);
-            en.1 += a;
-            en.2 += a * bh[i].y;
-            en.3 += a * bs[i].y;
-        }
+        let en = side.entry(e.patch).or_default();
+        en.0 += a * (bh[i].y - bs[i].y);
+        en.1 += a;
+        en.2 += a * bh[i].y;
+        en.3 += a * bs[i].y;
     }
-    println!("front area {fa:.4e} power h {fh:.4e} s {fs:.4e} ({:+.2} %)", 100.0 * (fh / fs - 1.0));
-    println!("back  area {ba:.4e} power h {bkh:.4e} s {bks:.4e} ({:+.2} %)", 100.0 * (bkh / bks - 1.0));
+    for (name, side) in [("front", &front), ("back ", &by_poly)] {
+        let (a, ph, ps) = side.values().fold((0.0, 0.0, 0.0), |t, v| (t.0 + v.1, t.1 + v.2, t.2 + v.3));
+        println!("{name} area {a:.4e} power h {ph:.4e} s {ps:.4e} ({:+.2} %)", 100.0 * (ph / ps - 1.0));
+    }
+    let (bkh, bks) = by_poly.values().fold((0.0, 0.0), |t, v| (t.0 + v.2, t.1 + v.3));
     let mut v: Vec<_> = by_poly.into_iter().collect();
     v.sort_by(|a, b| b.1 .0.total_cmp(&a.1 .0));
     let mut acc = 0.0;

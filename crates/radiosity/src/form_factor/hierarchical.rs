@@ -299,10 +299,11 @@ pub fn link(
     let total_rays = AtomicU64::new(0);
     let min_size = opts.min_size.unwrap_or(0.0);
     let reach = if opts.closure_rays > 0 { EXPOSURE_REACH * min_size } else { 0.0 };
+    let (lo, hi) = geom::bounds_3d(&mesh.positions);
+    // Distance below which a point counts as on a plane.
+    let eps = 1e-7 * (hi - lo).length().max(f64::MIN_POSITIVE);
     // Closure and exposure first: the exposure shapes how clusters send and receive.
     let closure = if opts.closure_rays > 0 {
-        let (lo, hi) = geom::bounds_3d(&mesh.positions);
-        let eps = 1e-7 * (hi - lo).length().max(f64::MIN_POSITIVE);
         let t = &tree;
         let c = per_element(n, "closure", progress, &stopped, (f32::NAN, 1.0f32), |i| {
             let (c, o, rays) = closure(t, mesh, rays, receivers, ff.seed, opts.closure_rays, eps, reach, i as usize);
@@ -354,7 +355,6 @@ pub fn link(
         }
     }
     let total_power = (emitted + ambient * area).max(f64::MIN_POSITIVE);
-    let (lo, hi) = geom::bounds_3d(&mesh.positions);
     // Few emitters: their light goes to every element through exact factors.
     let emitting: Vec<u32> = (0..n as u32)
         .filter(|&e| emission[e as usize].max_element() > 0.0 && nodes[tree.leaf_of[e as usize] as usize].area > 0.0)
@@ -377,7 +377,7 @@ pub fn link(
         sharp: emitting_area < SHARP_EMITTERS * area,
         emits,
         power_eps: opts.tolerance * total_power,
-        eps: 1e-7 * (hi - lo).length().max(f64::MIN_POSITIVE),
+        eps,
         direct,
         min_size: opts.min_size.unwrap_or(0.0),
         reach,
@@ -483,8 +483,6 @@ pub fn link(
             .collect();
         if !poor.is_empty() {
             let locator = crate::mesh::Locator::new(mesh);
-            let (lo, hi) = geom::bounds_3d(&mesh.positions);
-            let eps = 1e-7 * (hi - lo).length().max(f64::MIN_POSITIVE);
             let m = RAY_ROW_FACTOR * opts.closure_rays;
             progress.begin("ray rows", poor.len() as u64);
             let rows: Vec<(u32, Vec<(u32, f32)>)> = poor
@@ -521,10 +519,43 @@ const RAY_ROW_Z: f64 = 1.5;
 /// Rays of a traced row, in closure rays.
 const RAY_ROW_FACTOR: usize = 2;
 
-/// Element `i`'s row traced by `m` rays stratified over its cosine-weighted hemisphere
-/// from its open points: the share of rays whose first hit is the front of element `j` is
-/// `F_ij` (the Monte Carlo form factor; emitting elements that the direct columns hold are
-/// left out).
+/// Casts `m` rays from element `i`'s open points (cycled), stratified over the
+/// cosine-weighted hemisphere about its normal with a stream drawn from `seed`, and hands
+/// each direction and first hit (the face it meets, as [`SceneRays::closest_facing`]) to
+/// `visit`. False when the element has no open point (nothing cast).
+#[allow(clippy::too_many_arguments)]
+fn hemisphere_rays(
+    mesh: &Mesh,
+    rays: &SceneRays,
+    receivers: &Receivers,
+    seed: u64,
+    m: usize,
+    eps: f64,
+    i: usize,
+    mut visit: impl FnMut(DVec3, DVec3, Option<(crate::accel::Hit, u32)>),
+) -> bool {
+    use rand::RngExt;
+    let e = &mesh.elements[i];
+    let pts = receivers.points(i, 2);
+    if pts.is_empty() {
+        return false;
+    }
+    let mut rng = rng_for(seed, i as u64);
+    let (t, b) = crate::sampling::basis(e.normal);
+    let shift: f64 = rng.random();
+    for k in 0..m {
+        let p = pts[k % pts.len()] + e.normal * eps;
+        let (u1, u2) = ((k as f64 + rng.random::<f64>()) / m as f64, (k as f64 * 0.618_033_988_75 + shift).fract());
+        let d = crate::sampling::cosine_hemisphere(u1, u2);
+        let dir = t * d.x + b * d.y + e.normal * d.z;
+        visit(p, dir, rays.closest_facing(p.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch)));
+    }
+    true
+}
+
+/// Element `i`'s row traced by `m` rays ([`hemisphere_rays`]): the share of rays whose
+/// first hit is the front of element `j` is `F_ij` (the Monte Carlo form factor; emitting
+/// elements that the direct columns hold are left out).
 #[allow(clippy::too_many_arguments)]
 fn ray_row(
     tree: &Tree,
@@ -538,33 +569,20 @@ fn ray_row(
     eps: f64,
     i: u32,
 ) -> Vec<(u32, f32)> {
-    use rand::RngExt;
-    let e = &mesh.elements[i as usize];
-    let pts = receivers.points(i as usize, 2);
-    if pts.is_empty() || !(tree.nodes[tree.leaf_of[i as usize] as usize].area > 0.0) {
+    if !(tree.nodes[tree.leaf_of[i as usize] as usize].area > 0.0) {
         return Vec::new();
     }
-    let mut rng = rng_for(seed ^ 0x5241_5952, i as u64);
-    let (t, b) = crate::sampling::basis(e.normal);
-    let shift: f64 = rng.random();
     let mut hits: Vec<u32> = Vec::with_capacity(m);
-    for k in 0..m {
-        let p = pts[k % pts.len()] + e.normal * eps;
-        let (u1, u2) = ((k as f64 + rng.random::<f64>()) / m as f64, (k as f64 * 0.618_033_988_75 + shift).fract());
-        let d = crate::sampling::cosine_hemisphere(u1, u2);
-        let dir = t * d.x + b * d.y + e.normal * d.z;
-        let Some((h, q)) = rays.closest_facing(p.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch)) else {
-            continue;
-        };
+    hemisphere_rays(mesh, rays, receivers, seed ^ 0x5241_5952, m, eps, i as usize, |p, dir, hit| {
+        let Some((h, q)) = hit else { return };
         if rays.normal_of(q).dot(dir.as_vec3()) >= 0.0 {
-            continue;
+            return;
         }
         let j = locator.locate(mesh, q, p + dir * h.t as f64);
-        if j == i || emitters.is_some_and(|em| em.binary_search(&j).is_ok()) {
-            continue;
+        if j != i && !emitters.is_some_and(|em| em.binary_search(&j).is_ok()) {
+            hits.push(j);
         }
-        hits.push(j);
-    }
+    });
     hits.sort_unstable();
     let mut row: Vec<(u32, f32)> = Vec::new();
     for j in hits {
@@ -579,11 +597,11 @@ fn ray_row(
     row
 }
 
-/// The closure of element `i`: the fraction of `m` rays from its open points, stratified
-/// over the cosine-weighted hemisphere, whose first hit is a front face (NaN for an element
-/// with no open area); its *exposure*, the fraction that meets nothing within `reach` (the
-/// minimum size: they leave the element's neighbourhood, so far nodes can see it; 1 for an
-/// element with no open area); and the rays cast.
+/// The closure of element `i` from `m` rays ([`hemisphere_rays`]): the fraction whose
+/// first hit is a front face (NaN for an element with no open area); its *exposure*, the
+/// fraction that meets nothing within `reach` (the minimum size: they leave the element's
+/// neighbourhood, so far nodes can see it; 1 for an element with no open area); and the
+/// rays cast.
 #[allow(clippy::too_many_arguments)]
 fn closure(
     tree: &Tree,
@@ -596,35 +614,19 @@ fn closure(
     reach: f64,
     i: usize,
 ) -> (f32, f32, u64) {
-    use rand::RngExt;
-    let e = &mesh.elements[i];
     if !(tree.nodes[tree.leaf_of[i] as usize].area > 0.0) {
         return (f32::NAN, 1.0, 0);
     }
-    let pts = receivers.points(i, 2);
-    if pts.is_empty() {
-        return (f32::NAN, 1.0, 0);
-    }
-    let mut rng = rng_for(seed ^ 0x434c_4f53, i as u64);
-    let (t, b) = crate::sampling::basis(e.normal);
-    let shift: f64 = rng.random();
     let (mut hit, mut open) = (0, 0);
-    for k in 0..m {
-        let p = pts[k % pts.len()] + e.normal * eps;
-        let (u1, u2) = ((k as f64 + rng.random::<f64>()) / m as f64, (k as f64 * 0.618_033_988_75 + shift).fract());
-        let d = crate::sampling::cosine_hemisphere(u1, u2);
-        let dir = (t * d.x + b * d.y + e.normal * d.z).as_vec3();
-        match rays.closest_facing(p.as_vec3(), dir, f32::INFINITY, Some(e.patch)) {
-            Some((h, q)) => {
-                if rays.normal_of(q).dot(dir) < 0.0 {
-                    hit += 1;
-                }
-                if h.t as f64 > reach {
-                    open += 1;
-                }
-            }
-            None => open += 1,
+    let cast = hemisphere_rays(mesh, rays, receivers, seed ^ 0x434c_4f53, m, eps, i, |_, dir, h| match h {
+        Some((h, q)) => {
+            hit += (rays.normal_of(q).dot(dir.as_vec3()) < 0.0) as u32;
+            open += (h.t as f64 > reach) as u32;
         }
+        None => open += 1,
+    });
+    if !cast {
+        return (f32::NAN, 1.0, 0);
     }
     (hit as f32 / m as f32, open as f32 / m as f32, m as u64)
 }
@@ -749,10 +751,10 @@ impl Ctx<'_> {
             let terminal = !cr && !cs;
             if terminal && ratio >= self.opts.separation {
                 // Near each other: integrated with the rays themselves.
-                let (f, _) = self.terminal_factor(r, s, &mut rng, c, &mut scratch);
+                let near = self.near(r, s);
+                let (f, _) = self.terminal_factor(r, s, near, &mut rng, c, &mut scratch);
                 c.terminal += 1;
                 if f > 0.0 {
-                    let near = self.near(r, s);
                     let dir = if ns.surface { Link::MEAN } else { self.reading(r, s, near) };
                     links.push(Link { r, s, f: f as f32, g: [0.0; 3], dir, near });
                 }
@@ -858,10 +860,10 @@ impl Ctx<'_> {
         if terminal && ratio >= self.opts.separation {
             // Near each other: the power R receives integrated with the rays, spread to
             // R's elements by their normals about the mean direction of arrival.
-            let (f, d) = self.terminal_factor(r, s, rng, c, sc);
+            let near = self.near(r, s);
+            let (f, d) = self.terminal_factor(r, s, near, rng, c, sc);
             c.terminal += 1;
             if f > 0.0 && d != DVec3::ZERO {
-                let near = self.near(r, s);
                 let spread = self.tree.front_area(r, d, !near);
                 if spread > 1e-6 * nr.area as f64 {
                     let read = if ns.surface { Link::MEAN } else { self.reading_towards(s, -d, near) };
@@ -933,8 +935,8 @@ impl Ctx<'_> {
     /// weighted by their kernel with each point of `s` standing for a disk of `A_S / N`
     /// (Wallace, Elmquist & Haines 1989), so that pairs that touch stay bounded. Also
     /// returns the mean direction of arrival (weighted by contribution).
-    fn terminal_factor(&self, r: u32, s: u32, rng: &mut Rng, c: &mut Counts, sc: &mut Scratch) -> (f64, DVec3) {
-        let near = self.near(r, s);
+    #[allow(clippy::too_many_arguments)]
+    fn terminal_factor(&self, r: u32, s: u32, near: bool, rng: &mut Rng, c: &mut Counts, sc: &mut Scratch) -> (f64, DVec3) {
         use rand::RngExt;
         let m = 2 * self.opts.visibility_rays;
         let mesh = self.mesh;
@@ -1100,12 +1102,12 @@ impl Ctx<'_> {
         let m = if minor { self.opts.visibility_rays.div_ceil(2) } else { self.opts.visibility_rays };
         let (mut valid, mut seen) = (0u32, 0u32);
         let mesh = self.mesh;
+        // Clusters of a far pair by their exposed area: their projected areas leave out
+        // faces that no far node sees, so the rays test what lies between the nodes.
+        let pick = |k: u32, u: f64| if near { self.tree.element_at(k, u) } else { self.tree.element_at_exposed(k, u) };
         for t in 0..m {
             let ur = (t as f64 + rng.random::<f64>()) / m as f64;
             let us = ((t * 7 + 3) % m) as f64 / m as f64 + rng.random::<f64>() / m as f64;
-            // Clusters by their exposed area: their projected areas leave out faces that no
-            // far node sees, so the rays test what lies between the nodes.
-            let pick = |k: u32, u: f64| if near { self.tree.element_at(k, u) } else { self.tree.element_at_exposed(k, u) };
             let (ei, ej) = (pick(r, ur), pick(s, us));
             let (a, b) = (&mesh.elements[ei as usize], &mesh.elements[ej as usize]);
             let x = a.point(&mesh.positions, rng.random(), rng.random());
@@ -1358,7 +1360,7 @@ mod tests {
                 let (mut c, mut sc) = (Counts::default(), Scratch::default());
                 let runs = 200;
                 let mean: f64 =
-                    (0..runs).map(|_| ctx.terminal_factor(ra, rb, &mut rng, &mut c, &mut sc).0).sum::<f64>()
+                    (0..runs).map(|_| ctx.terminal_factor(ra, rb, false, &mut rng, &mut c, &mut sc).0).sum::<f64>()
                         / runs as f64;
                 // The exact unoccluded factor at single points, through the tree (every node
                 // within the near budget, so every one is opened down to its elements).

@@ -456,10 +456,16 @@ impl Tree {
     /// The element at area fraction `u ∈ [0, 1)` of node `k` (area-uniform choice).
     #[inline]
     pub fn element_at(&self, k: u32, u: f64) -> u32 {
+        self.element_by(&self.area_prefix, k, u)
+    }
+
+    /// The element at fraction `u` of node `k`'s share of the prefix sums `p` (tree order).
+    #[inline]
+    fn element_by(&self, p: &[f64], k: u32, u: f64) -> u32 {
         let nd = &self.nodes[k as usize];
         let (a, b) = (nd.first as usize, (nd.first + nd.count) as usize);
-        let target = self.area_prefix[a] + u * (self.area_prefix[b] - self.area_prefix[a]);
-        let slot = self.area_prefix[a + 1..=b].partition_point(|&p| p <= target);
+        let target = p[a] + u * (p[b] - p[a]);
+        let slot = p[a + 1..=b].partition_point(|&x| x <= target);
         self.order[(a + slot).min(b - 1)]
     }
 
@@ -471,11 +477,7 @@ impl Tree {
         if nd.surface || !(nd.area_x > 0.0) {
             return self.element_at(k, u);
         }
-        let (a, b) = (nd.first as usize, (nd.first + nd.count) as usize);
-        let p = &self.exposed_prefix;
-        let target = p[a] + u * (p[b] - p[a]);
-        let slot = p[a + 1..=b].partition_point(|&x| x <= target);
-        self.order[(a + slot).min(b - 1)]
+        self.element_by(&self.exposed_prefix, k, u)
     }
 
     /// Up to `k` nodes that cover node `node` (descending into the largest first): a
@@ -818,13 +820,14 @@ impl Hierarchy {
             return;
         }
         let n = self.len();
+        let full_count = rows.len() as u64;
         let mut full = vec![Vec::new(); n];
         for (i, r) in rows {
             self.link_scale[i as usize] = 0.0;
             full[i as usize] = r;
         }
         let rr = SparseRows::from_rows(full);
-        self.stats.ray_rows = (0..n).filter(|&i| self.link_scale[i] == 0.0).count() as u64;
+        self.stats.ray_rows = full_count;
         self.stats.ray_row_entries = rr.nnz() as u64;
         self.ray_rows = Some(rr);
         self.scale = vec![1.0; n];
