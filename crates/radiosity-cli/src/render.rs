@@ -71,6 +71,13 @@ pub struct RenderArgs {
     /// Final gather: shadow rays per pixel sample and emitter, as N × N.
     #[arg(long, value_name = "N", default_value_t = 2)]
     pub shadow_rays: usize,
+    /// Final gather: indirect rays per pixel sample, as N × N, each reading the reflected
+    /// radiosity of the element it meets; 0 interpolates the indirect light from the mesh's
+    /// vertices instead (no rays, no noise; as exact as the form factors, as coarse as the
+    /// mesh) [default: 2 on the hierarchical transport, 0 on form-factor rows and for the
+    /// stochastic solvers]
+    #[arg(long, value_name = "N")]
+    pub gather_rays: Option<usize>,
     /// PNG exposure: radiance is multiplied by this before sRGB encoding [default: automatic].
     #[arg(long, value_name = "SCALE")]
     pub exposure: Option<f64>,
@@ -132,6 +139,9 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let gather = a.mode == "gather";
     if a.shadow_rays == 0 || a.shadow_rays > 16 {
         bail!("--shadow-rays must be between 1 and 16");
+    }
+    if a.gather_rays.is_some_and(|g| g > 16) {
+        bail!("--gather-rays must be between 0 and 16");
     }
     if let Some(e) = a.exposure {
         if !(e.is_finite() && e > 0.0) {
@@ -264,7 +274,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let t = Instant::now();
     let tracer =
         tracer_cell.into_inner().unwrap_or_else(|| ElementTracer::new(&solved.mesh, &two_sided_of(&solved.scene)));
-    let indirect = if gather { Some(solved.indirect_irradiance().1) } else { None };
+    let gather_rays = a.gather_rays.unwrap_or_else(|| solved.default_gather_axis());
+    let indirect = if gather { Some(solved.indirect(gather_rays > 0)) } else { None };
     let mut report = solved.report();
     report.timings.load = load_s;
     report.warnings.extend(warnings);
@@ -284,6 +295,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                     height: a.height,
                     spp_axis: spp,
                     shadow_axis: a.shadow_rays,
+                    gather_axis: gather_rays,
                     seed: a.solve.seed,
                 };
                 solved.render_gather(cam, &gopts, &tracer, hv, &render_progress)
@@ -314,7 +326,11 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         }
         report.rays_cast += rays;
         report.images.extend(files.iter().cloned());
-        report.views.push(ViewReport { name: name.clone(), images: files, seconds: tv.elapsed().as_secs_f64(), rays });
+        let indirect = indirect.as_ref().map(|i| match i {
+            gather::Indirect::Gathered { .. } => format!("gathered ({gather_rays}×{gather_rays} rays per pixel position)"),
+            gather::Indirect::Interpolated(_) => "interpolated from the vertices".to_string(),
+        });
+        report.views.push(ViewReport { name: name.clone(), images: files, seconds: tv.elapsed().as_secs_f64(), rays, indirect });
     }
     if let Some(dir) = &a.frames {
         let exposure = first_exposure.unwrap_or(1.0);

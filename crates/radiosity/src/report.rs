@@ -114,6 +114,10 @@ pub struct ViewReport {
     pub seconds: f64,
     /// Rays cast for it.
     pub rays: u64,
+    /// How the final gather read the indirect light: "gathered (N×N rays per pixel
+    /// position)" or "interpolated from the vertices"; None for Gouraud and flat images.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub indirect: Option<String>,
 }
 
 /// The whole report.

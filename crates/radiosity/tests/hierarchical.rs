@@ -256,9 +256,10 @@ fn final_gather_on_the_hierarchy_matches_rows() {
         let solved = solve_scene(scene, settings, &NoProgress).unwrap();
         let two_sided: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
         let tracer = radiosity::render::gouraud::ElementTracer::new(&solved.mesh, &two_sided);
-        let (_, hv) = solved.indirect_irradiance();
-        let opts = radiosity::render::gather::Options { width: 64, height: 64, spp_axis: 2, shadow_axis: 2, seed: 0 };
-        solved.render_gather(&camera, &opts, &tracer, &hv, &NoProgress).0
+        let indirect = solved.indirect(false);
+        let opts =
+            radiosity::render::gather::Options { width: 64, height: 64, spp_axis: 2, shadow_axis: 2, gather_axis: 0, seed: 0 };
+        solved.render_gather(&camera, &opts, &tracer, &indirect, &NoProgress).0
     };
     let rows = render(&Settings::default());
     let hier = render(&hierarchical());
