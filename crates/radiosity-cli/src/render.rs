@@ -74,8 +74,8 @@ pub struct RenderArgs {
     /// Final gather: indirect rays per pixel sample, as N × N, each reading the reflected
     /// radiosity of the element it meets; 0 interpolates the indirect light from the mesh's
     /// vertices instead (no rays, no noise; as exact as the form factors, as coarse as the
-    /// mesh) [default: 2 on the hierarchical transport, 0 on form-factor rows and for the
-    /// stochastic solvers]
+    /// mesh) [default: 2 on the hierarchical transport and for the stochastic solvers, 0 on
+    /// form-factor rows]
     #[arg(long, value_name = "N")]
     pub gather_rays: Option<usize>,
     /// PNG exposure: radiance is multiplied by this before sRGB encoding [default: automatic].

@@ -740,17 +740,18 @@ impl Solved {
         }
     }
 
-    /// The default of [`gather::Options::gather_axis`] for this solution: 2 (4 gather rays
-    /// per pixel position) on the hierarchical operator, whose per-element gather is
-    /// built for transport, not display (on the conference room the interpolated indirect
-    /// light is 3–5 % dark); 0 (interpolated, noise-free) on form-factor rows, where
-    /// `F·(B − E)` per element is as good as the factors (Cornell box: 1.63 % against a
-    /// path tracer interpolated, 3.83 % gathered with 4 rays per position) and for the
-    /// stochastic solvers.
+    /// The default of [`gather::Options::gather_axis`] for this solution: 0 (interpolated,
+    /// noise-free) on form-factor rows, where `F·(B − E)` per element is as good as the
+    /// factors (Cornell box: 1.63 % against a path tracer interpolated, 3.83 % gathered with
+    /// 2 × 2 rays per position); 2 (gathered) on the hierarchical operator, whose
+    /// per-element gather is built for transport, not display (on the conference room the
+    /// interpolated first bounce is 5 % dark), and for the stochastic solvers, whose
+    /// per-element indirect estimate is noisy (classroom 15.4 % interpolated, 11.2 %
+    /// gathered). BENCHMARKS.md "Fifth round".
     pub fn default_gather_axis(&self) -> usize {
         match &self.transport {
-            Some(Operator::Hierarchical(_)) => 2,
-            _ => 0,
+            Some(Operator::Rows(_)) => 0,
+            Some(Operator::Hierarchical(_)) | None => 2,
         }
     }
 

@@ -15,7 +15,8 @@
 //! and its soft shadows are resolved per pixel, whatever the mesh. The indirect irradiance
 //! (light that has bounced at least once) is read in one of two ways ([`Indirect`]):
 //!
-//! - **gathered** (the default on the hierarchical transport): cosine-distributed rays from `x` itself, each reading the
+//! - **gathered** (the default on the hierarchical transport and for the stochastic
+//!   solvers): cosine-distributed rays from `x` itself, each reading the
 //!   reflected radiosity `B − E` of the element it meets — the one-bounce final gather of
 //!   Reichert 1992 and of photon-map renderers (Jensen 1996). `x`'s own view of the scene
 //!   is resolved per pixel (contact shadows under furniture, corners), only the light
