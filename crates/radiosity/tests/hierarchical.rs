@@ -862,6 +862,67 @@ fn conference_back_light() {
     }
 }
 
+/// Diagnostic (ignored): the operator's gather of the solution's reflected light against
+/// the same gather by rays (`form_factor::hierarchical::gather_by_rays`, `RAYS` per element,
+/// default 128), area-weighted by kind of receiver (linked or traced row, front or back
+/// copy, open or partly covered) and by the closure fit's scale. Above one: the operator
+/// delivers more than arrives (light created), below: less. `MODEL` (default the lit
+/// conference).
+#[test]
+#[ignore]
+fn operator_against_ray_gather() {
+    let rel = std::env::var("MODEL").unwrap_or_else(|_| "scenes/conference/conference-lit.toml".into());
+    let Some(path) = common::shared(&rel) else {
+        return;
+    };
+    let m: usize = std::env::var("RAYS").ok().and_then(|x| x.parse().ok()).unwrap_or(128);
+    let scene = radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    let solved = solve_scene(scene, &hierarchical(), &NoProgress).unwrap();
+    let refl = radiosity::pipeline::reflected_radiosity(&solved.scene, &solved.mesh, &solved.solution);
+    let op_t = solved.transport.as_ref().unwrap();
+    let mut op = vec![radiosity::Rgb::ZERO; refl.len()];
+    op_t.gather(&refl, &mut op);
+    let mc = radiosity::form_factor::hierarchical::gather_by_rays(&solved.mesh, &solved.rays, &solved.receivers, &refl, m, 77);
+    let scale = op_t.hierarchy().unwrap().link_scale();
+    let area = solved.receivers.open_areas(&solved.mesh);
+    let mut acc = std::collections::BTreeMap::<String, (f64, f64, f64)>::new();
+    let (mut top, mut tmc) = (0.0, 0.0);
+    for i in 0..refl.len() {
+        if !mc[i].y.is_finite() {
+            continue;
+        }
+        let back = solved.scene.polygons[solved.mesh.elements[i].patch as usize].back_side;
+        let s = scale[i];
+        let kinds = [
+            format!(
+                "{} {} {}",
+                if s == 0.0 { "traced" } else { "linked" },
+                if back { "back" } else { "front" },
+                if solved.receivers.open_fraction[i] < 1.0 { "partly covered" } else { "open" }
+            ),
+            match s {
+                s if s == 0.0 => "fit scale 0 (traced)".to_string(),
+                s if s < 1.0 => "fit scale < 1".into(),
+                s if s < 1.1 => "fit scale 1–1.1".into(),
+                s if s < 1.3 => "fit scale 1.1–1.3".into(),
+                _ => "fit scale > 1.3".into(),
+            },
+        ];
+        for k in kinds {
+            let e = acc.entry(k).or_default();
+            e.0 += area[i] * op[i].y;
+            e.1 += area[i] * mc[i].y;
+            e.2 += area[i];
+        }
+        top += area[i] * op[i].y;
+        tmc += area[i] * mc[i].y;
+    }
+    for (k, (o, c, a)) in &acc {
+        println!("{k:34} area {a:.3e}  operator/rays {:.4}  share of the light {:.4}", o / c, c / tmc);
+    }
+    println!("all: operator/rays {:.4}", top / tmc);
+}
+
 /// Diagnostic (ignored): the links of a few elements of one polygon (env `LINE`, its OBJ
 /// line; default the conference ceiling; `PICKS` elements, `RAYS` rays each; `WHY=1`
 /// prints where the tree stops linking the largest unlinked hits) against Monte Carlo

@@ -1376,3 +1376,42 @@ mod tests {
         }
     }
 }
+
+/// `F·x` estimated by rays, matrix-free: per element, `m` cosine-distributed rays from its
+/// open points ([`hemisphere_rays`], stream drawn from `seed`), each reading `x` of the
+/// element it meets (nothing for a ray that leaves or meets the back of a one-sided
+/// face). An unbiased yardstick for an operator's gather (the final gather does the same
+/// per pixel); NaN for an element with no open point.
+pub fn gather_by_rays(
+    mesh: &Mesh,
+    rays: &SceneRays,
+    receivers: &Receivers,
+    x: &[crate::Rgb],
+    m: usize,
+    seed: u64,
+) -> Vec<crate::Rgb> {
+    let locator = crate::mesh::Locator::new(mesh);
+    let (lo, hi) = mesh
+        .elements
+        .iter()
+        .fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(l, h), e| (l.min(e.centroid), h.max(e.centroid)));
+    let eps = 1e-7 * (hi - lo).length().max(f64::MIN_POSITIVE);
+    (0..mesh.elements.len())
+        .into_par_iter()
+        .with_min_len(64)
+        .map(|i| {
+            let mut sum = crate::Rgb::ZERO;
+            let cast = hemisphere_rays(mesh, rays, receivers, seed, m, eps, i, |p, dir, hit| {
+                let Some((h, q)) = hit else { return };
+                if rays.normal_of(q).dot(dir.as_vec3()) < 0.0 {
+                    sum += x[locator.locate(mesh, q, p + dir * h.t as f64) as usize];
+                }
+            });
+            if cast {
+                sum * (1.0 / m as f64)
+            } else {
+                crate::Rgb::splat(f64::NAN)
+            }
+        })
+        .collect()
+}
