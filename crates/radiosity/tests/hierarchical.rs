@@ -921,6 +921,33 @@ fn operator_against_ray_gather() {
         println!("{k:34} area {a:.3e}  operator/rays {:.4}  share of the light {:.4}", o / c, c / tmc);
     }
     println!("all: operator/rays {:.4}", top / tmc);
+    // `TOP=n`: the polygons whose receivers the operator over-delivers most, A·(op − rays).
+    let n_top: usize = std::env::var("TOP").ok().and_then(|x| x.parse().ok()).unwrap_or(0);
+    if n_top > 0 {
+        let mut by_poly = std::collections::HashMap::<u32, (f64, f64, f64, f64)>::new();
+        for i in 0..refl.len() {
+            if mc[i].y.is_finite() {
+                let e = by_poly.entry(solved.mesh.elements[i].patch).or_default();
+                e.0 += area[i] * (op[i].y - mc[i].y);
+                e.1 += area[i];
+                e.2 += area[i] * op[i].y;
+                e.3 += area[i] * mc[i].y;
+            }
+        }
+        let mut v: Vec<_> = by_poly.into_iter().collect();
+        v.sort_by(|a, b| b.1 .0.total_cmp(&a.1 .0));
+        for (poly, (ex, a, o, c)) in v.iter().take(n_top) {
+            let p = &solved.scene.polygons[*poly as usize];
+            println!(
+                "excess {ex:.3e} area {a:.1} operator {:.4} rays {:.4} back {} n {:.2?} {:?}",
+                o / a,
+                c / a,
+                p.back_side,
+                p.normal,
+                p.loc
+            );
+        }
+    }
 }
 
 /// Diagnostic (ignored): the links of a few elements of one polygon (env `LINE`, its OBJ
