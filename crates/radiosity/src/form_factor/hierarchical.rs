@@ -574,13 +574,10 @@ fn ray_row(
     }
     let mut hits: Vec<u32> = Vec::with_capacity(m);
     hemisphere_rays(mesh, rays, receivers, seed ^ 0x5241_5952, m, eps, i as usize, |p, dir, hit| {
-        let Some((h, q)) = hit else { return };
-        if rays.normal_of(q).dot(dir.as_vec3()) >= 0.0 {
-            return;
-        }
-        let j = locator.locate(mesh, q, p + dir * h.t as f64);
-        if j != i && !emitters.is_some_and(|em| em.binary_search(&j).is_ok()) {
-            hits.push(j);
+        if let Some(j) = locator.front_hit(mesh, rays, p, dir, hit) {
+            if j != i && !emitters.is_some_and(|em| em.binary_search(&j).is_ok()) {
+                hits.push(j);
+            }
         }
     });
     hits.sort_unstable();
@@ -1391,10 +1388,7 @@ pub fn gather_by_rays(
     seed: u64,
 ) -> Vec<crate::Rgb> {
     let locator = crate::mesh::Locator::new(mesh);
-    let (lo, hi) = mesh
-        .elements
-        .iter()
-        .fold((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)), |(l, h), e| (l.min(e.centroid), h.max(e.centroid)));
+    let (lo, hi) = geom::bounds_3d(&mesh.positions);
     let eps = 1e-7 * (hi - lo).length().max(f64::MIN_POSITIVE);
     (0..mesh.elements.len())
         .into_par_iter()
@@ -1402,9 +1396,8 @@ pub fn gather_by_rays(
         .map(|i| {
             let mut sum = crate::Rgb::ZERO;
             let cast = hemisphere_rays(mesh, rays, receivers, seed, m, eps, i, |p, dir, hit| {
-                let Some((h, q)) = hit else { return };
-                if rays.normal_of(q).dot(dir.as_vec3()) < 0.0 {
-                    sum += x[locator.locate(mesh, q, p + dir * h.t as f64) as usize];
+                if let Some(j) = locator.front_hit(mesh, rays, p, dir, hit) {
+                    sum += x[j as usize];
                 }
             });
             if cast {

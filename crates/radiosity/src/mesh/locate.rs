@@ -1,10 +1,11 @@
 //! Point location on the mesh: which element of a patch contains a point on that patch.
 //! Used wherever a ray hit on a scene polygon must become an element (the stochastic
-//! solvers' deposits).
+//! solvers' deposits, the hierarchy's traced rows, the final gather's indirect rays).
 
 use glam::{DVec2, DVec3};
 
 use super::Mesh;
+use crate::accel::{Hit, SceneRays};
 use crate::sampling::basis;
 
 /// Finds the element of a patch that contains a point on the patch: a uniform grid per
@@ -103,6 +104,22 @@ impl Locator {
             })
             .collect();
         Locator { patches, edges }
+    }
+
+    /// The element whose front a ray from `origin` along `dir` meets, given the ray's first
+    /// hit (as [`SceneRays::closest_facing`] returns it); None when the ray leaves the scene
+    /// or meets the back of a one-sided face.
+    #[inline]
+    pub fn front_hit(
+        &self,
+        mesh: &Mesh,
+        rays: &SceneRays,
+        origin: DVec3,
+        dir: DVec3,
+        hit: Option<(Hit, u32)>,
+    ) -> Option<u32> {
+        let (h, q) = hit?;
+        (rays.normal_of(q).dot(dir.as_vec3()) < 0.0).then(|| self.locate(mesh, q, origin + dir * h.t as f64))
     }
 
     /// The element of `patch` containing `p` (or the nearest, for points a rounding error

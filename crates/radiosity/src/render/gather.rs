@@ -205,14 +205,10 @@ fn gathered(
     for &(u1, u2) in dirs {
         let d = crate::sampling::cosine_hemisphere(u1, u2);
         let dir = t * d.x + b * d.y + n * d.z;
-        let Some((hit, q)) = rays.closest_facing(p.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(patch)) else {
-            continue;
-        };
-        if rays.normal_of(q).dot(dir.as_vec3()) >= 0.0 {
-            continue;
+        let hit = rays.closest_facing(p.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(patch));
+        if let Some(j) = locator.front_hit(mesh, rays, p, dir, hit) {
+            sum += reflected[j as usize];
         }
-        let j = locator.locate(mesh, q, p + dir * hit.t as f64);
-        sum += reflected[j as usize];
     }
     sum * (1.0 / dirs.len() as f64)
 }
