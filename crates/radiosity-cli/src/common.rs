@@ -102,6 +102,10 @@ pub struct SolveFlags {
     /// Refuse a reflectance ≥ 1 (e.g. glTF's default white) instead of lowering it to 0.95.
     #[arg(long)]
     pub strict: bool,
+    /// A uniform sky around the scene: its radiance as one value or R,G,B (every ray that
+    /// leaves the geometry sees it); replaces the scene file's [sky]; 0 removes it.
+    #[arg(long, value_name = "L", value_parser = parse_sky)]
+    pub sky: Option<[f64; 3]>,
     #[command(flatten)]
     pub adaptive: AdaptiveFlags,
     /// Seed for every random choice (results do not depend on --threads).
@@ -206,6 +210,9 @@ impl SolveFlags {
         let mut desc = scene::load(&self.scene)?;
         desc.two_sided |= self.two_sided;
         desc.strict = self.strict;
+        if let Some(l) = self.sky {
+            desc.sky = (l.iter().any(|c| *c > 0.0)).then(|| scene::Sky { radiance: radiosity::Rgb::from_array(l) });
+        }
         let scene = Scene::from_desc(desc)?;
         for w in &scene.warnings {
             eprintln!("warning: {w}");
@@ -213,6 +220,24 @@ impl SolveFlags {
         scene.check_emits()?;
         Ok((scene, t.elapsed().as_secs_f64()))
     }
+}
+
+/// `--sky L` or `--sky R,G,B`: finite, non-negative radiance.
+fn parse_sky(s: &str) -> std::result::Result<[f64; 3], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let vals: Vec<f64> = parts
+        .iter()
+        .map(|p| p.parse::<f64>().map_err(|_| format!("'{p}' is not a number")))
+        .collect::<std::result::Result<_, _>>()?;
+    let v = match vals.as_slice() {
+        [g] => [*g; 3],
+        [r, g, b] => [*r, *g, *b],
+        _ => return Err(format!("expected one radiance or three (R,G,B), got {}", vals.len())),
+    };
+    if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
+        return Err(format!("sky radiance {v:?} must be finite and non-negative"));
+    }
+    Ok(v)
 }
 
 /// The largest `--time-budget`, in seconds (about 31 years): far beyond any run, far below
@@ -509,7 +534,7 @@ pub fn energy_summary(e: &radiosity::report::EnergyReport) -> String {
     let lum = |c: [f64; 3]| radiosity::luminance(glam::DVec3::from_array(c));
     let emitted = lum(e.emitted).max(f64::MIN_POSITIVE);
     let pct = |c: [f64; 3]| 100.0 * lum(c) / emitted;
-    format!(
+    let line = format!(
         "energy: emitted {:.4e} = absorbed {:.2} % + escaped {:.2} % + back faces {:.2} % + unshot {:.2} % (imbalance {:.1e})",
         lum(e.emitted),
         pct(e.absorbed),
@@ -517,7 +542,11 @@ pub fn energy_summary(e: &radiosity::report::EnergyReport) -> String {
         pct(e.back_faces),
         pct(e.unshot),
         e.imbalance
-    )
+    );
+    match e.sky_incident {
+        Some(s) => format!("{line}\n        sky: {:.4e} reaches the surfaces; its first reflection is part of the emitted", lum(s)),
+        None => line,
+    }
 }
 
 /// The exit code for a run that stopped for `reason`: 130 after an interrupt (outputs were

@@ -227,7 +227,12 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     {
         let rays = radiosity::accel::SceneRays::new(&scene.polygons);
         for (name, cam, _, _) in &views {
-            if let Some(why) = view_coverage(&scene, &rays, cam, a.width, a.height, 64).problem() {
+            let cov = view_coverage(&scene, &rays, cam, a.width, a.height, 64);
+            // Under a sky, a view of the sky alone is not black.
+            if scene.lit_sky().is_some() && cov.back * 100 < cov.total().max(1) {
+                continue;
+            }
+            if let Some(why) = cov.problem() {
                 let p = cam.position;
                 let w = format!("view '{name}': the camera at ({}, {}, {}) {why}", p.x, p.y, p.z);
                 eprintln!("warning: {w}");

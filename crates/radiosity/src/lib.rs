@@ -35,6 +35,7 @@ pub mod render;
 pub mod report;
 pub mod sampling;
 pub mod scene;
+pub mod sky;
 pub mod solve;
 pub mod transport;
 pub mod view_factors;

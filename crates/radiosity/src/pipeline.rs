@@ -92,6 +92,8 @@ pub struct Solved {
     pub refinement: Vec<mesh::adaptive::PassStats>,
     /// Warnings about the solution (e.g. light lost into back faces).
     pub warnings: Vec<String>,
+    /// Sky exposure `S_i` per element (empty without a sky; see [`crate::sky`]).
+    pub sky_exposure: Vec<f64>,
 }
 
 /// Called after solver iterations with the scene and mesh being solved and the state
@@ -107,6 +109,20 @@ pub fn element_materials(scene: &Scene, mesh: &Mesh) -> (Vec<Rgb>, Vec<Rgb>) {
             (m.reflectance, m.exitance())
         })
         .unzip()
+}
+
+/// Per-element reflectance and the emitted exitance of the linear system: the surfaces' own
+/// (`π·Ke`) plus, under a sky, its first reflection `ρ_i · π L_sky · S_i` (`exposure` =
+/// `S_i`, see [`crate::sky`]; empty without a sky).
+pub fn system_materials(scene: &Scene, mesh: &Mesh, exposure: &[f64]) -> (Vec<Rgb>, Vec<Rgb>) {
+    let (rho, mut emission) = element_materials(scene, mesh);
+    if let Some(sky) = scene.lit_sky() {
+        let h = sky.radiance * std::f64::consts::PI;
+        for ((e, r), s) in emission.iter_mut().zip(&rho).zip(exposure) {
+            *e += *r * h * *s;
+        }
+    }
+    (rho, emission)
 }
 
 /// Where element `i` comes from, for messages: `file:line (object 'name')`.
@@ -135,6 +151,8 @@ struct Prepared {
     reflectance: Vec<Rgb>,
     emission: Vec<Rgb>,
     area: Vec<f64>,
+    /// Sky exposure per element (empty without a sky).
+    sky_exposure: Vec<f64>,
     timings: Timings,
     refinement: Vec<mesh::adaptive::PassStats>,
     /// Rays cast by refinement so far (counted into the form-factor statistics).
@@ -206,6 +224,7 @@ fn prepare(
         reflectance: Vec::new(),
         emission: Vec::new(),
         area: Vec::new(),
+        sky_exposure: Vec::new(),
         timings,
         refinement,
         refine_rays,
@@ -304,13 +323,17 @@ impl Prepared {
             if progress.should_stop() {
                 return Err(Error::Cancelled);
             }
+            let t_sky = Instant::now();
+            self.sky_exposure = sky_exposure(scene, mesh, rays, &receivers, progress)?;
+            let sky_seconds = t_sky.elapsed().as_secs_f64();
+            self.timings.sky += sky_seconds;
             let (transport, mut ff_stats) = match self.kind {
                 transport::Kind::Rows | transport::Kind::Auto => {
                     let (rows, stats) = form_factor::compute(scene, mesh, rays, &receivers, &settings.form_factors, progress)?;
                     (Operator::Rows(rows), stats)
                 }
                 transport::Kind::Hierarchical => {
-                    let (rho, em) = element_materials(scene, mesh);
+                    let (rho, em) = system_materials(scene, mesh, &self.sky_exposure);
                     let mut tree = tree.take().expect("built above");
                     tree.refit(mesh, &receivers.open_areas(mesh));
                     let (h, rays_cast) = form_factor::hierarchical::link(
@@ -350,12 +373,16 @@ impl Prepared {
                 }
             };
             ff_stats.rays += receivers.rays + self.refine_rays;
-            self.timings.form_factors += t.elapsed().as_secs_f64();
+            self.timings.form_factors += t.elapsed().as_secs_f64() - sky_seconds;
             (receivers, Some(transport), Some(ff_stats))
         } else {
-            (Receivers::all_open(mesh), None, None)
+            let receivers = Receivers::all_open(mesh);
+            let t_sky = Instant::now();
+            self.sky_exposure = sky_exposure(scene, mesh, rays, &receivers, progress)?;
+            self.timings.sky += t_sky.elapsed().as_secs_f64();
+            (receivers, None, None)
         };
-        let (reflectance, emission) = element_materials(scene, mesh);
+        let (reflectance, emission) = system_materials(scene, mesh, &self.sky_exposure);
         // Covered parts of elements neither emit nor reflect: the power formulation and the
         // residual use the open areas.
         self.area = receivers.open_areas(mesh);
@@ -428,8 +455,21 @@ impl Prepared {
             timings,
             refinement: self.refinement,
             warnings,
+            sky_exposure: self.sky_exposure,
         }
     }
+}
+
+/// The sky exposure of every element when the scene has a lit sky (empty otherwise).
+fn sky_exposure(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, progress: &dyn Progress) -> Result<Vec<f64>> {
+    if scene.lit_sky().is_none() {
+        return Ok(Vec::new());
+    }
+    let (s, _) = crate::sky::exposure(mesh, rays, receivers, crate::sky::DEFAULT_AXIS, progress);
+    if progress.should_stop() {
+        return Err(Error::Cancelled);
+    }
+    Ok(s)
 }
 
 /// The operator `settings.transport` means for a mesh of `count` elements: auto picks
@@ -651,7 +691,8 @@ pub fn render_radiosity(
 ) -> Image {
     let cam = PinholeCamera::new(camera, opts.width, opts.height);
     let vertex_b = reconstruct::vertex_radiosity(scene, mesh, element_b);
-    gouraud::render(mesh, tracer, element_b, &vertex_b, &cam, opts, progress)
+    let sky = scene.lit_sky().map_or(Rgb::ZERO, |s| s.radiance);
+    gouraud::render(mesh, tracer, element_b, &vertex_b, &cam, opts, sky, progress)
 }
 
 impl Solved {
@@ -698,9 +739,9 @@ impl Solved {
     /// Indirect irradiance per element — light that has bounced at least once — and its
     /// per-vertex reconstruction (for the final gather). With form factors it is
     /// `(F·(B − E))_i`; without (stochastic solvers) it is `(B − E)/ρ` minus the direct
-    /// irradiance sampled at the element's receiver point.
+    /// irradiance sampled at the element's receiver point and the sky's `π L_sky S_i`.
     pub fn indirect_irradiance(&self) -> (Vec<Rgb>, Vec<Rgb>) {
-        let (rho, emission) = element_materials(&self.scene, &self.mesh);
+        let (rho, emission) = system_materials(&self.scene, &self.mesh, &self.sky_exposure);
         let b = self.solution.display_radiosity();
         let h: Vec<Rgb> = match &self.transport {
             Some(f) => indirect_irradiance(&self.scene, &self.mesh, f, &self.solution),
@@ -772,14 +813,27 @@ impl Solved {
     /// Energy bookkeeping: emitted = absorbed + escaped + unshot (see
     /// [`solve::EnergyBalance`]).
     pub fn energy(&self) -> EnergyReport {
-        EnergyReport::from(&self.solution.energy)
+        let mut e = EnergyReport::from(&self.solution.energy);
+        if let Some(sky) = self.scene.lit_sky() {
+            let open: f64 = self
+                .mesh
+                .elements
+                .iter()
+                .zip(&self.receivers.open_fraction)
+                .zip(&self.sky_exposure)
+                .map(|((el, f), s)| el.area * f * s)
+                .sum();
+            e.sky_incident = Some((sky.radiance * std::f64::consts::PI * open).to_array());
+        }
+        e
     }
 
     /// Renders one view with Gouraud (or flat) shading.
     pub fn render(&self, camera: &Camera, opts: &gouraud::Options, tracer: &ElementTracer, progress: &dyn Progress) -> Image {
         let cam = PinholeCamera::new(camera, opts.width, opts.height);
         let display = self.solution.display_radiosity();
-        gouraud::render(&self.mesh, tracer, &display, &self.vertex_radiosity, &cam, opts, progress)
+        let sky = self.scene.lit_sky().map_or(Rgb::ZERO, |s| s.radiance);
+        gouraud::render(&self.mesh, tracer, &display, &self.vertex_radiosity, &cam, opts, sky, progress)
     }
 
     /// A report with everything but the images and total time filled in.

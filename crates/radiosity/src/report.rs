@@ -40,6 +40,8 @@ pub struct Timings {
     pub bvh: f64,
     /// Form factors.
     pub form_factors: f64,
+    /// Sky exposure of the elements (scenes with a sky).
+    pub sky: f64,
     /// Solving.
     pub solve: f64,
     /// Per-vertex reconstruction.
@@ -66,6 +68,11 @@ pub struct EnergyReport {
     pub unshot: [f64; 3],
     /// max over channels of |emitted − absorbed − escaped − back_faces − unshot| / emitted.
     pub imbalance: f64,
+    /// Under a sky: the sky's power reaching the surfaces, Σ π·L_sky·S_i·A_i. Its first
+    /// reflection (ρ times it) is part of `emitted`: the system's sources are the surfaces'
+    /// own emission plus that reflection.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sky_incident: Option<[f64; 3]>,
 }
 
 impl From<&EnergyBalance> for EnergyReport {
@@ -77,6 +84,7 @@ impl From<&EnergyBalance> for EnergyReport {
             back_faces: e.back_faces.to_array(),
             unshot: e.unshot.to_array(),
             imbalance: e.relative_imbalance(),
+            sky_incident: None,
         }
     }
 }

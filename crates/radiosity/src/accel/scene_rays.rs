@@ -154,6 +154,14 @@ impl SceneRays {
         Some((h, p))
     }
 
+    /// True if a ray from `origin` (optionally leaving polygon `from`) meets no polygon,
+    /// either side: it leaves the scene and sees the sky.
+    #[inline]
+    pub fn escapes(&self, origin: Vec3, dir: Vec3, from: Option<u32>) -> bool {
+        let ray = Ray::new(origin, dir, 0.0, f32::INFINITY);
+        !self.bvh.occluded_filtered(&ray, |prim| from.is_some_and(|f| self.is_or_twin(self.tri_polygon[prim as usize], f)))
+    }
+
     /// Closest polygon hit by a ray from `origin` (optionally leaving polygon `from`),
     /// returning the hit and the polygon index.
     #[inline]

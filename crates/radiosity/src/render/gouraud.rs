@@ -176,7 +176,9 @@ pub fn inverse_bilinear(p: DVec3, c: &[DVec3; 4], normal: DVec3) -> (f64, f64) {
 /// Renders the mesh with per-vertex radiosity `vertex_b` (Gouraud) or per-element
 /// radiosity `element_b` (flat). Primary visibility comes from the rasteriser
 /// ([`super::raster`]); each sample's surface point is its camera ray's intersection with
-/// the visible element's plane.
+/// the visible element's plane. A sample that sees no element shows `background` (the sky's
+/// radiance, or zero).
+#[allow(clippy::too_many_arguments)]
 pub fn render(
     mesh: &Mesh,
     tracer: &ElementTracer,
@@ -184,6 +186,7 @@ pub fn render(
     vertex_b: &[Rgb],
     cam: &PinholeCamera,
     opts: &Options,
+    background: Rgb,
     progress: &dyn Progress,
 ) -> Image {
     let (w, h) = (opts.width, opts.height);
@@ -207,8 +210,12 @@ pub fn render(
                 for si in 0..s {
                     let k = (y * s + sj) * ids.width + x * s + si;
                     let e = ids.ids[k];
-                    if e == u32::MAX || !front[e as usize] {
-                        continue; // background, or the back of a one-sided surface: black
+                    if e == u32::MAX {
+                        acc += background * std::f64::consts::PI; // (divided by π below)
+                        continue;
+                    }
+                    if !front[e as usize] {
+                        continue; // the back of a one-sided surface: black
                     }
                     acc += match opts.shading {
                         Shading::Flat => element_b[e as usize],

@@ -180,6 +180,23 @@ pub struct PolygonDesc {
     pub loc: Option<Location>,
 }
 
+/// A uniform sky: every ray that leaves the geometry sees the same radiance (a constant
+/// environment, Mitsuba's `constant` emitter). Under it a surface point's irradiance is
+/// `π·L_sky·S(x)`, with `S(x)` the cosine-weighted fraction of its hemisphere that sees
+/// no polygon (its sky exposure); see [`crate::sky`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sky {
+    /// Radiance of the sky, linear RGB (same units as `Ke`).
+    pub radiance: Rgb,
+}
+
+impl Sky {
+    /// True if the sky gives light.
+    pub fn is_lit(&self) -> bool {
+        self.radiance.max_element() > 0.0
+    }
+}
+
 /// A scene as read from a file, before validation.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SceneDesc {
@@ -206,6 +223,8 @@ pub struct SceneDesc {
     /// "2 KHR_lights_punctual lights are ignored (not supported yet)"), for the error of a
     /// scene without light ([`Scene::check_emits`]).
     pub ignored_lights: Vec<String>,
+    /// A uniform sky around the geometry (TOML `[sky]`, the CLI's `--sky`).
+    pub sky: Option<Sky>,
 }
 
 /// A validated material.
@@ -290,6 +309,8 @@ pub struct Scene {
     /// Light lost on the way, in words: emitting polygons skipped by validation and
     /// [`SceneDesc::ignored_lights`] (see [`Scene::check_emits`]).
     pub lost_light: Vec<String>,
+    /// The sky, if any (validated: finite, non-negative, not all zero).
+    pub sky: Option<Sky>,
 }
 
 impl Scene {
@@ -331,16 +352,26 @@ impl Scene {
         self.polygons.iter().any(|p| self.materials[p.material as usize].is_emitter())
     }
 
-    /// An error when no surface emits light (a render or solve would be all black), saying
+    /// The sky, if it gives light.
+    pub fn lit_sky(&self) -> Option<Sky> {
+        self.sky.filter(Sky::is_lit)
+    }
+
+    /// True if some polygon emits light or the sky gives light.
+    pub fn has_light(&self) -> bool {
+        self.has_emitter() || self.lit_sky().is_some()
+    }
+
+    /// An error when no surface emits light and there is no sky (a render or solve would be all black), saying
     /// what was skipped or ignored: emitting polygons dropped as degenerate, lights of a kind
     /// not supported. View factors need no light and do not call this.
     pub fn check_emits(&self) -> Result<()> {
-        if self.has_emitter() {
+        if self.has_light() {
             return Ok(());
         }
         let why = if self.lost_light.is_empty() {
-            "no material has a positive emission (OBJ/MTL Ke, glTF emissiveFactor, TOML emission), so the \
-             image would be black"
+            "no material has a positive emission (OBJ/MTL Ke, glTF emissiveFactor, TOML emission) and \
+             there is no sky (TOML [sky], --sky), so the image would be black"
                 .to_string()
         } else {
             self.lost_light.join("; ")

@@ -17,6 +17,10 @@
 //! reflectance = [0, 0, 0]      # diffuse reflectance ρ in [0, 1)
 //! two_sided = false            # this material's choice wins over the scene's (and over
 //!                              # --two-sided): a lamp stays one-sided in a two-sided room
+//!
+//! [sky]                        # optional: a uniform sky around the geometry
+//! radiance = 1.0               # radiance of every direction that sees no polygon
+//!                              # (one value or [r, g, b]; same units as emission)
 //! ```
 //!
 //! Material names that are not bare TOML keys are quoted: `[materials."wall 1"]`. An
@@ -58,6 +62,21 @@ struct FileToml {
     camera: Option<Spanned<CameraSpec>>,
     #[serde(default)]
     materials: BTreeMap<String, Spanned<MaterialToml>>,
+    sky: Option<Spanned<SkyToml>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SkyToml {
+    radiance: Spanned<Radiance>,
+}
+
+/// One value for every channel, or `[r, g, b]`.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum Radiance {
+    Grey(f64),
+    Rgb([f64; 3]),
 }
 
 #[derive(Deserialize)]
@@ -206,6 +225,18 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
     };
 
     // Material overrides.
+    if let Some(sky) = &spec.sky {
+        let r = &sky.get_ref().radiance;
+        let v = match r.get_ref() {
+            Radiance::Grey(g) => [*g; 3],
+            Radiance::Rgb(c) => *c,
+        };
+        if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
+            return Err(Error::input(at(r.span()), format!("[sky]: radiance {v:?} must be finite and non-negative")));
+        }
+        desc.sky = Some(super::Sky { radiance: Rgb::from_array(v) });
+    }
+
     for (name, ov) in &spec.materials {
         let loc = at(ov.span());
         let ov = ov.get_ref();
@@ -358,6 +389,23 @@ mod tests {
         assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("non-negative"), "{e}");
         let e = parse("mesh = \"builtin:cornell\"\n[materials.nope]\nemission = [1, 1, 1]\n").unwrap_err();
         assert!(e.to_string().starts_with("s.toml:2:") && e.to_string().contains("green, light, red, white"), "{e}");
+    }
+
+    #[test]
+    fn sky_takes_one_radiance_or_three_and_checks_them() {
+        let d = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = 1.5\n").unwrap();
+        assert_eq!(d.sky, Some(crate::scene::Sky { radiance: Rgb::splat(1.5) }));
+        let d = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = [0.1, 0.2, 0.3]\n").unwrap();
+        assert_eq!(d.sky, Some(crate::scene::Sky { radiance: Rgb::new(0.1, 0.2, 0.3) }));
+        assert_eq!(parse("mesh = \"builtin:cornell\"\n").unwrap().sky, None);
+        let e = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = [1, -2, 3]\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("non-negative"), "{e}");
+        let e = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = inf\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("finite"), "{e}");
+        let e = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = 1\nsun = 2\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:4:1:"), "{e}");
+        let e = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = [1, 2]\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:3:"), "{e}");
     }
 
     #[test]

@@ -23,6 +23,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
         mut warnings,
         strict,
         ignored_lights,
+        sky,
     } = desc;
     // The scene's file: where its polygons came from (built-in scenes: the name).
     let file = polygons.iter().find_map(|p| p.loc.as_ref().map(|l| l.file.clone())).unwrap_or_else(|| name.clone().into());
@@ -75,6 +76,15 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             ));
         }
         mats.push(Material { name: m.name.clone(), reflectance, emission: m.emission, two_sided: m.two_sided.unwrap_or(two_sided) });
+    }
+    if let Some(sky) = &sky {
+        let e = sky.radiance.to_array();
+        if e.iter().any(|c| !c.is_finite() || *c < 0.0 || *c > MAX_EMISSION) {
+            return Err(Error::input(
+                Location::file(&file),
+                format!("sky radiance {e:?} must be finite, non-negative and at most {MAX_EMISSION:e}"),
+            ));
+        }
     }
     if !capped.is_empty() {
         warnings.push(Warning {
@@ -265,7 +275,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     }
     obstructions.sort_unstable();
     obstructions.dedup();
-    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions, file, lost_light })
+    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions, file, lost_light, sky })
 }
 
 /// Polygons skipped for one reason: how many, and the first.

@@ -1,0 +1,193 @@
+//! A uniform sky (`[sky]`, `--sky`): closed forms and equivalences that could fail.
+//!
+//! - Under a sky of radiance L, a surface that sees only sky has L_out = ρ·L; inside an
+//!   open box with black walls the floor's mean radiance is ρ·L·F(floor → opening), the
+//!   parallel-squares view factor.
+//! - A uniform sky seen through an opening is the same light as a black lid of emitted
+//!   radiance L over that opening: an open box with grey walls under the sky must match the
+//!   same box closed by such a lid, object by object (interreflections included).
+//! - No sky light enters a closed room.
+//! - The final gather shows L where camera rays leave the scene and ρ·L on a surface that
+//!   sees only sky, exactly, whether the indirect light is gathered or interpolated.
+
+mod common;
+
+use std::f64::consts::PI;
+
+use glam::DVec3;
+use radiosity::pipeline::{solve_scene, Settings, Solved};
+use radiosity::render::gouraud::ElementTracer;
+use radiosity::scene::{Camera, MaterialDesc, ObjectDesc, PolygonDesc, Scene, SceneDesc, Sky};
+use radiosity::solve::Solver;
+use radiosity::transport::Kind;
+use radiosity::{form_factor, NoProgress, Rgb};
+
+/// View factor between equal, parallel, coaxial squares of side `a` at distance `c`
+/// (Howell's catalogue C-11 with X = Y = a/c).
+fn parallel_squares(a: f64, c: f64) -> f64 {
+    let x = a / c;
+    let q = (1.0 + x * x).sqrt();
+    2.0 / (PI * x * x)
+        * (((1.0 + x * x).powi(2) / (1.0 + 2.0 * x * x)).sqrt().ln() + 2.0 * x * q * (x / q).atan() - 2.0 * x * x.atan())
+}
+
+/// A unit-square floor (y = 0, facing up) with four inward walls of height `h`; walls of
+/// reflectance `wall_rho`, floor 0.5; optionally a lid at y = h facing down, emitting
+/// `lid` radiance with reflectance 0; optionally the sky.
+fn open_box(h: f64, wall_rho: f64, lid: Option<f64>, sky: Option<f64>) -> Scene {
+    let mut d = SceneDesc { name: "open-box".into(), ..Default::default() };
+    d.materials.push(MaterialDesc::diffuse("floor", Rgb::splat(0.5)));
+    d.materials.push(MaterialDesc::diffuse("wall", Rgb::splat(wall_rho)));
+    d.materials.push(MaterialDesc { emission: Rgb::splat(lid.unwrap_or(0.0)), ..MaterialDesc::diffuse("lid", Rgb::ZERO) });
+    let faces = common::box_faces(DVec3::ZERO, DVec3::new(1.0, h, 1.0), true);
+    // box_faces order: z = lo, z = hi, y = lo, y = hi, x = hi, x = lo.
+    let names = ["wall-z0", "wall-z1", "floor", "lid", "wall-x1", "wall-x0"];
+    for (k, (f, name)) in faces.into_iter().zip(names).enumerate() {
+        let material = match name {
+            "floor" => 0,
+            "lid" if lid.is_none() => continue,
+            "lid" => 2,
+            _ => 1,
+        };
+        d.objects.push(ObjectDesc { name: name.into(), loc: None });
+        let object = d.objects.len() as u32 - 1;
+        let _ = k;
+        d.polygons.push(PolygonDesc { vertices: f, material, object, loc: None });
+    }
+    d.sky = sky.map(|l| Sky { radiance: Rgb::splat(l) });
+    Scene::from_desc(d).unwrap()
+}
+
+fn object_radiance(solved: &Solved, name: &str) -> f64 {
+    let o = solved.objects().into_iter().find(|o| o.name == name).unwrap_or_else(|| panic!("no object {name}"));
+    o.radiance_rgb[0]
+}
+
+fn settings(transport: Kind, method: form_factor::Method, solver: Solver) -> Settings {
+    let mut s = Settings { mesh_size: Some(0.05), transport, solver, ..Default::default() };
+    s.form_factors.method = method;
+    s
+}
+
+#[test]
+fn floor_of_an_open_box_with_black_walls_sees_the_sky_through_the_opening() {
+    let h = 0.5;
+    let exact = 0.5 * 2.0 * parallel_squares(1.0, h);
+    for (transport, solver) in
+        [(Kind::Rows, Solver::Jacobi), (Kind::Hierarchical, Solver::Jacobi), (Kind::Rows, Solver::StochasticJacobi)]
+    {
+        let scene = open_box(h, 0.0, None, Some(2.0));
+        let solved = solve_scene(scene, &settings(transport, form_factor::Method::PointSampled, solver), &NoProgress).unwrap();
+        let l = object_radiance(&solved, "floor");
+        let err = (l - exact) / exact;
+        eprintln!("{transport:?} {solver}: floor L = {l:.5}, exact ρ·L·F = {exact:.5} ({:+.3} %)", 100.0 * err);
+        assert!(err.abs() < 0.01, "{transport:?} {solver}: floor {l} against {exact}");
+        // A black wall reflects nothing; the sky alone would be 2·0 = 0.
+        assert!(object_radiance(&solved, "wall-x0").abs() < 1e-12);
+    }
+}
+
+#[test]
+fn open_box_under_the_sky_matches_the_box_closed_by_a_black_emitting_lid() {
+    let h = 0.6;
+    for (transport, method, tol) in [
+        (Kind::Rows, form_factor::Method::Analytic, 0.01),
+        (Kind::Rows, form_factor::Method::PointSampled, 0.01),
+        (Kind::Hierarchical, form_factor::Method::PointSampled, 0.02),
+    ] {
+        let s = settings(transport, method, Solver::Jacobi);
+        let sky = solve_scene(open_box(h, 0.7, None, Some(1.0)), &s, &NoProgress).unwrap();
+        let lid = solve_scene(open_box(h, 0.7, Some(1.0), None), &s, &NoProgress).unwrap();
+        for name in ["floor", "wall-x0", "wall-x1", "wall-z0", "wall-z1"] {
+            let (a, b) = (object_radiance(&sky, name), object_radiance(&lid, name));
+            let err = (a - b) / b;
+            eprintln!("{transport:?} {}: {name} sky {a:.5} lid {b:.5} ({:+.3} %)", method.name(), 100.0 * err);
+            assert!(err.abs() < tol, "{transport:?} {}: {name}: sky {a} against lid {b}", method.name());
+        }
+        // The sky's first reflection is the emitted power of the system: ρ·π·L·S·A summed.
+        let e = sky.solution.energy.emitted[0];
+        let expect: f64 = sky
+            .mesh
+            .elements
+            .iter()
+            .zip(&sky.sky_exposure)
+            .zip(&sky.receivers.open_fraction)
+            .map(|((el, s), f)| {
+                let rho = sky.scene.materials[sky.scene.polygons[el.patch as usize].material as usize].reflectance.x;
+                rho * PI * s * el.area * f
+            })
+            .sum();
+        assert!((e - expect).abs() <= 1e-9 * expect, "emitted {e} against the sky's first reflection {expect}");
+    }
+}
+
+#[test]
+fn no_sky_light_enters_a_closed_room() {
+    let mut d = SceneDesc { name: "closed".into(), ..Default::default() };
+    d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
+    d.objects.push(ObjectDesc { name: "room".into(), loc: None });
+    for f in common::box_faces(DVec3::ZERO, DVec3::ONE, true) {
+        d.polygons.push(PolygonDesc { vertices: f, material: 0, object: 0, loc: None });
+    }
+    // A box inside, two-sided, so rays also start from surfaces facing every way.
+    d.objects.push(ObjectDesc { name: "box".into(), loc: None });
+    d.materials.push(MaterialDesc { two_sided: Some(true), ..MaterialDesc::diffuse("box", Rgb::splat(0.5)) });
+    for f in common::box_faces(DVec3::splat(0.3), DVec3::splat(0.6), false) {
+        d.polygons.push(PolygonDesc { vertices: f, material: 1, object: 1, loc: None });
+    }
+    d.sky = Some(Sky { radiance: Rgb::ONE });
+    let scene = Scene::from_desc(d).unwrap();
+    scene.check_emits().expect("a sky is a light");
+    let solved = solve_scene(scene, &Settings { mesh_size: Some(0.1), ..Default::default() }, &NoProgress).unwrap();
+    assert!(solved.sky_exposure.iter().all(|&s| s == 0.0), "sky exposure inside a closed room");
+    assert!(solved.solution.radiosity.iter().all(|b| *b == Rgb::ZERO));
+}
+
+#[test]
+fn final_gather_shows_the_sky_and_a_plate_lit_by_it_exactly() {
+    let l_sky = 1.5;
+    let mut d = SceneDesc { name: "plate".into(), ..Default::default() };
+    d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
+    d.objects.push(ObjectDesc { name: "plate".into(), loc: None });
+    let v = vec![DVec3::new(0., 0., 0.), DVec3::new(0., 0., 1.), DVec3::new(1., 0., 1.), DVec3::new(1., 0., 0.)];
+    d.polygons.push(PolygonDesc { vertices: v, material: 0, object: 0, loc: None });
+    d.sky = Some(Sky { radiance: Rgb::splat(l_sky) });
+    let scene = Scene::from_desc(d).unwrap();
+    let solved = solve_scene(scene, &Settings { mesh_size: Some(0.1), ..Default::default() }, &NoProgress).unwrap();
+    assert!(solved.sky_exposure.iter().all(|&s| s == 1.0));
+    // The plate fills the middle of the view; the corners see only sky.
+    let cam = Camera { position: DVec3::new(0.5, 1.0, 0.5), look_at: DVec3::new(0.5, 0.0, 0.5), up: DVec3::Z, vfov_deg: 90.0 };
+    let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
+    let tracer = ElementTracer::new(&solved.mesh, &two);
+    let (w, hgt) = (32, 32);
+    let check = |img: &radiosity::render::Image, what: &str| {
+        let (mut sky_px, mut plate_px) = (0, 0);
+        for (k, p) in img.pixels.iter().enumerate() {
+            let (x, y) = ((k % w) as f64 + 0.5, (k / w) as f64 + 0.5);
+            // Pixel centre direction: the plate spans x, y in [8, 24) of the 32² image at 90°.
+            let inside = (8.5..23.5).contains(&x) && (8.5..23.5).contains(&y);
+            let outside = !(7.0..25.0).contains(&x) || !(7.0..25.0).contains(&y);
+            if inside {
+                plate_px += 1;
+                assert!((p.x - 0.5 * l_sky).abs() < 1e-9, "{what}: plate pixel {x},{y} = {}", p.x);
+            } else if outside {
+                sky_px += 1;
+                assert!((p.x - l_sky).abs() < 1e-9, "{what}: sky pixel {x},{y} = {}", p.x);
+            }
+        }
+        assert!(sky_px > 300 && plate_px > 200, "{what}: {sky_px} sky and {plate_px} plate pixels");
+    };
+    for (gathered, axis) in [(true, 2), (false, 0)] {
+        let opts = radiosity::render::gather::Options { width: w, height: hgt, spp_axis: 2, shadow_axis: 2, gather_axis: axis, seed: 1 };
+        let indirect = solved.indirect(gathered);
+        let (img, _) = solved.render_gather(&cam, &opts, &tracer, &indirect, &NoProgress);
+        check(&img, if gathered { "gathered" } else { "interpolated" });
+    }
+    let opts = radiosity::render::gouraud::Options {
+        width: w,
+        height: hgt,
+        spp_axis: 1,
+        shading: radiosity::render::gouraud::Shading::Gouraud,
+    };
+    check(&solved.render(&cam, &opts, &tracer, &NoProgress), "gouraud");
+}
