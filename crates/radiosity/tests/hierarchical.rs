@@ -951,7 +951,7 @@ fn operator_against_ray_gather() {
 }
 
 /// Diagnostic (ignored): the links of a few elements of one polygon (env `LINE`, its OBJ
-/// line; default the conference ceiling; `PICKS` elements, `RAYS` rays each; `WHY=1`
+/// line; default the conference ceiling; `MODEL` as in `operator_against_ray_gather`; `PICKS` elements, `RAYS` rays each; `WHY=1`
 /// prints where the tree stops linking the largest unlinked hits) against Monte Carlo
 /// gathering of the same solution:
 /// per link source, `f · B̃_S` against the mean of `B` over cosine-weighted rays that land
@@ -960,7 +960,8 @@ fn operator_against_ray_gather() {
 #[ignore]
 fn link_truth() {
     use radiosity::transport::hierarchical::Link;
-    let Some(path) = common::shared("scenes/conference/conference-lit.toml") else {
+    let rel = std::env::var("MODEL").unwrap_or_else(|_| "scenes/conference/conference-lit.toml".into());
+    let Some(path) = common::shared(&rel) else {
         return;
     };
     let line: usize = std::env::var("LINE").ok().and_then(|x| x.parse().ok()).unwrap_or(194462);
@@ -1117,6 +1118,38 @@ fn link_truth() {
         by.sort_by(|a, b| (b.2 - b.1).abs().total_cmp(&(a.2 - a.1).abs()));
         for (s, l, m) in by.iter().take(6) {
             let ns = &tree.nodes[*s as usize];
+            if std::env::var("DETAIL").is_ok() {
+                // The source's elements: where they lie against the receiver's plane, their
+                // radiosity and normals; and the link's factor and reading.
+                let (mut front, mut behind) = ((0.0, 0.0), (0.0, 0.0));
+                for slot in ns.first..ns.first + ns.count {
+                    let j = tree.order[slot as usize] as usize;
+                    let ej = &sol.mesh.elements[j];
+                    let side = e.normal.dot(ej.centroid - e.centroid);
+                    let acc = if side > 1e-6 { &mut front } else { &mut behind };
+                    acc.0 += ej.area;
+                    acc.1 += ej.area * b[j].y;
+                }
+                let full = links.iter().find(|x| x.0 == *s).unwrap();
+                let mut k = 0u32;
+                loop {
+                    let nd = &tree.nodes[k as usize];
+                    if h.links_full(k).any(|l| l.0 == *s) {
+                        println!(
+                            "      held by node {k}: surface {} count {} size {:.2} area {:.3} lo {:?} hi {:?}",
+                            nd.surface, nd.count, nd.size(), nd.area, nd.lo, nd.hi
+                        );
+                    }
+                    if k == leaf {
+                        break;
+                    }
+                    k = *nd.child.iter().find(|&&c| tree.contains(c, leaf)).unwrap();
+                }
+                println!(
+                    "      lo {:?} hi {:?}; in front: area {:.3} mean B {:.4}; behind/in plane: area {:.3} mean B {:.4}; factor {:.5} reads {:.4}",
+                    ns.lo, ns.hi, front.0, front.1 / front.0.max(1e-30), behind.0, behind.1 / behind.0.max(1e-30), full.3, full.1 / full.3.max(1e-30)
+                );
+            }
             println!(
                 "   src {s} surface {} count {} size {:.0} dist {:.0}: link {l:.5} mc {m:.5}",
                 ns.surface,

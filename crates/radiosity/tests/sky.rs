@@ -191,3 +191,63 @@ fn final_gather_shows_the_sky_and_a_plate_lit_by_it_exactly() {
     };
     check(&solved.render(&cam, &opts, &tracer, &NoProgress), "gouraud");
 }
+
+/// A closed two-sided room under the sky (walls 0.05 thick, a table inside) with the
+/// hierarchical operator at a minimum node size (0.4) where one cluster holds both sides of
+/// a wall: the largest radiosity inside against the largest outside.
+fn closed_two_sided_room_leak(cluster_receivers: bool) -> (f64, f64, usize) {
+    let mut d = SceneDesc { name: "closed-two-sided".into(), two_sided: true, ..Default::default() };
+    d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
+    d.objects.push(ObjectDesc { name: "room".into(), loc: None });
+    // The outer shell faces out, the inner one faces in.
+    for (lo, hi, inward) in [(DVec3::splat(-0.05), DVec3::splat(1.05), false), (DVec3::ZERO, DVec3::ONE, true)] {
+        for f in common::box_faces(lo, hi, inward) {
+            d.polygons.push(PolygonDesc { vertices: f, material: 0, object: 0, loc: None });
+        }
+    }
+    d.objects.push(ObjectDesc { name: "table".into(), loc: None });
+    for f in common::box_faces(DVec3::new(0.3, 0.0, 0.3), DVec3::new(0.7, 0.4, 0.7), false) {
+        d.polygons.push(PolygonDesc { vertices: f, material: 0, object: 1, loc: None });
+    }
+    d.sky = Some(Sky { radiance: Rgb::ONE });
+    let scene = Scene::from_desc(d).unwrap();
+    let mut s = settings(Kind::Hierarchical, form_factor::Method::PointSampled, Solver::Jacobi);
+    s.links.min_size = Some(0.4);
+    s.links.cluster_receivers = cluster_receivers;
+    let solved = solve_scene(scene, &s, &NoProgress).unwrap();
+    let b = solved.solution.display_radiosity();
+    let (mut inside, mut outside, mut n_in) = (0.0f64, 0.0f64, 0);
+    for (i, e) in solved.mesh.elements.iter().enumerate() {
+        let c = e.centroid;
+        // Inside: the inner shell's faces (facing the room's centre) and the table.
+        let in_room = c.min_element() > -1e-9 && c.max_element() < 1.0 + 1e-9;
+        let table = c.y < 0.41 && (0.29..0.71).contains(&c.x) && (0.29..0.71).contains(&c.z);
+        if in_room && (e.normal.dot(DVec3::splat(0.5) - c) > 0.0 || table) {
+            inside = inside.max(b[i].x);
+            n_in += 1;
+        } else {
+            outside = outside.max(b[i].x);
+        }
+    }
+    eprintln!("cluster receivers {cluster_receivers}: {n_in} elements inside, max B {inside:e}; outside max B {outside}");
+    (inside, outside, n_in)
+}
+
+/// No sky light leaks through two-sided walls into a closed room with the hierarchical
+/// operator when only surfaces receive links (`cluster_receivers` off): exactly zero inside.
+#[test]
+fn sky_light_does_not_leak_through_two_sided_walls_into_a_closed_room() {
+    let (inside, outside, n_in) = closed_two_sided_room_leak(false);
+    assert!(outside > 1.0, "the outside is sky-lit");
+    assert!(n_in > 100 && inside == 0.0, "sky light inside a closed room: B up to {inside:e}");
+}
+
+/// The same with cluster receivers (the default): NOT met yet — light arriving at a
+/// cluster that holds both sides of a wall is spread to its faces by their normals and
+/// reaches the inside (max B 5.6e-2 against 1.58 outside, 2026-12-02). Ignored until fixed.
+#[test]
+#[ignore]
+fn sky_light_does_not_leak_through_walls_with_cluster_receivers() {
+    let (inside, outside, _) = closed_two_sided_room_leak(true);
+    assert!(inside <= 1e-6 * outside, "sky light inside a closed room: B up to {inside:e}");
+}
