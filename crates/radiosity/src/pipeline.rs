@@ -789,9 +789,12 @@ impl Solved {
     /// interpolated first bounce is 5 % dark), and for the stochastic solvers, whose
     /// per-element indirect estimate is noisy (classroom 15.4 % interpolated, 11.2 %
     /// gathered). BENCHMARKS.md "Fifth round".
+    /// Under a sky the gathered axis is [`gather::SKY_AXIS`]: the gather rays then also
+    /// estimate the sky's direct light, whose noise dominates an open scene.
     pub fn default_gather_axis(&self) -> usize {
         match &self.transport {
             Some(Operator::Rows(_)) => 0,
+            Some(Operator::Hierarchical(_)) | None if self.scene.lit_sky().is_some() => gather::SKY_AXIS,
             Some(Operator::Hierarchical(_)) | None => 2,
         }
     }

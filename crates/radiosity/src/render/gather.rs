@@ -34,7 +34,7 @@
 //! radiance, and the sky's direct irradiance `π L_sky S(x)` ([`crate::sky`]) is estimated
 //! per position by cosine-distributed rays: the gather rays themselves when gathering (a
 //! ray that leaves the scene reads `π L_sky` where one that meets an element reads its
-//! `B − E`), `shadow × shadow` rays of their own when interpolating.
+//! `B − E`), [`SKY_AXIS`]² rays of their own per position when interpolating.
 //!
 //! Pixels average `spp × spp` stratified positions (box filter); shadow and gather rays are
 //! stratified over the whole pixel; each pixel draws its own random stream (seed, pixel),
@@ -52,6 +52,13 @@ use crate::mesh::{Locator, Mesh};
 use crate::sampling::{rng_for, stratified};
 use crate::scene::Scene;
 use crate::{Progress, Rgb};
+
+/// Sky rays per position, as `n × n` stratified cosine directions, when the indirect light
+/// is interpolated (gathering reads the sky through its own rays). The sky's direct light
+/// is a visibility average over the hemisphere, the noisiest term of an open scene: on
+/// Sponza's courtyard (BENCHMARKS.md, "Sky") 2 × 2 rays per position give 5.5 % against the
+/// path tracer, 4 × 4 give 3.3 %.
+pub const SKY_AXIS: usize = 4;
 
 /// Final-gather options.
 #[derive(Clone, Copy, Debug)]
@@ -140,7 +147,7 @@ pub fn render(
             let g = match indirect {
                 Indirect::Gathered { .. } => opts.gather_axis.max(1),
                 // Rays for the sky alone.
-                Indirect::Interpolated(_) if sky.is_some() => opts.shadow_axis.max(1),
+                Indirect::Interpolated(_) if sky.is_some() => SKY_AXIS,
                 Indirect::Interpolated(_) => 0,
             };
             let g2 = g * g;
