@@ -103,7 +103,8 @@ pub struct SolveFlags {
     #[arg(long)]
     pub strict: bool,
     /// A uniform sky around the scene: its radiance as one value or R,G,B (every ray that
-    /// leaves the geometry sees it); replaces the scene file's [sky]; 0 removes it.
+    /// leaves the geometry sees it); replaces the radiance of the scene file's [sky] (its
+    /// [sky.sun] stays); 0 removes it.
     #[arg(long, value_name = "L", value_parser = parse_sky)]
     pub sky: Option<[f64; 3]>,
     #[command(flatten)]
@@ -211,7 +212,9 @@ impl SolveFlags {
         desc.two_sided |= self.two_sided;
         desc.strict = self.strict;
         if let Some(l) = self.sky {
-            desc.sky = (l.iter().any(|c| *c > 0.0)).then(|| scene::Sky { radiance: radiosity::Rgb::from_array(l) });
+            let sun = desc.sky.and_then(|s| s.sun);
+            let radiance = radiosity::Rgb::from_array(l);
+            desc.sky = (radiance.max_element() > 0.0 || sun.is_some()).then_some(scene::Sky { radiance, sun });
         }
         let scene = Scene::from_desc(desc)?;
         for w in &scene.warnings {

@@ -92,8 +92,9 @@ pub struct Solved {
     pub refinement: Vec<mesh::adaptive::PassStats>,
     /// Warnings about the solution (e.g. light lost into back faces).
     pub warnings: Vec<String>,
-    /// Sky exposure `S_i` per element (empty without a sky; see [`crate::sky`]).
-    pub sky_exposure: Vec<f64>,
+    /// Direct irradiance from the sky and its sun per element (empty without a sky; see
+    /// [`crate::sky`]).
+    pub sky_irradiance: Vec<Rgb>,
 }
 
 /// Called after solver iterations with the scene and mesh being solved and the state
@@ -112,15 +113,12 @@ pub fn element_materials(scene: &Scene, mesh: &Mesh) -> (Vec<Rgb>, Vec<Rgb>) {
 }
 
 /// Per-element reflectance and the emitted exitance of the linear system: the surfaces' own
-/// (`π·Ke`) plus, under a sky, its first reflection `ρ_i · π L_sky · S_i` (`exposure` =
-/// `S_i`, see [`crate::sky`]; empty without a sky).
-pub fn system_materials(scene: &Scene, mesh: &Mesh, exposure: &[f64]) -> (Vec<Rgb>, Vec<Rgb>) {
+/// (`π·Ke`) plus, under a sky, its first reflection `ρ_i · H_sky,i` (`sky` = the direct
+/// irradiance from the sky and its sun, [`crate::sky::element_irradiance`]; empty without).
+pub fn system_materials(scene: &Scene, mesh: &Mesh, sky: &[Rgb]) -> (Vec<Rgb>, Vec<Rgb>) {
     let (rho, mut emission) = element_materials(scene, mesh);
-    if let Some(sky) = scene.lit_sky() {
-        let h = sky.radiance * std::f64::consts::PI;
-        for ((e, r), s) in emission.iter_mut().zip(&rho).zip(exposure) {
-            *e += *r * h * *s;
-        }
+    for ((e, r), h) in emission.iter_mut().zip(&rho).zip(sky) {
+        *e += *r * *h;
     }
     (rho, emission)
 }
@@ -151,8 +149,8 @@ struct Prepared {
     reflectance: Vec<Rgb>,
     emission: Vec<Rgb>,
     area: Vec<f64>,
-    /// Sky exposure per element (empty without a sky).
-    sky_exposure: Vec<f64>,
+    /// Direct irradiance from the sky and its sun per element (empty without a sky).
+    sky_irradiance: Vec<Rgb>,
     timings: Timings,
     refinement: Vec<mesh::adaptive::PassStats>,
     /// Rays cast by refinement so far (counted into the form-factor statistics).
@@ -224,7 +222,7 @@ fn prepare(
         reflectance: Vec::new(),
         emission: Vec::new(),
         area: Vec::new(),
-        sky_exposure: Vec::new(),
+        sky_irradiance: Vec::new(),
         timings,
         refinement,
         refine_rays,
@@ -324,7 +322,7 @@ impl Prepared {
                 return Err(Error::Cancelled);
             }
             let t_sky = Instant::now();
-            self.sky_exposure = sky_exposure(scene, mesh, rays, &receivers, progress)?;
+            self.sky_irradiance = sky_irradiance(scene, mesh, rays, &receivers, progress)?;
             let sky_seconds = t_sky.elapsed().as_secs_f64();
             self.timings.sky += sky_seconds;
             let (transport, mut ff_stats) = match self.kind {
@@ -333,7 +331,7 @@ impl Prepared {
                     (Operator::Rows(rows), stats)
                 }
                 transport::Kind::Hierarchical => {
-                    let (rho, em) = system_materials(scene, mesh, &self.sky_exposure);
+                    let (rho, em) = system_materials(scene, mesh, &self.sky_irradiance);
                     let mut tree = tree.take().expect("built above");
                     tree.refit(mesh, &receivers.open_areas(mesh));
                     let (h, rays_cast) = form_factor::hierarchical::link(
@@ -378,11 +376,11 @@ impl Prepared {
         } else {
             let receivers = Receivers::all_open(mesh);
             let t_sky = Instant::now();
-            self.sky_exposure = sky_exposure(scene, mesh, rays, &receivers, progress)?;
+            self.sky_irradiance = sky_irradiance(scene, mesh, rays, &receivers, progress)?;
             self.timings.sky += t_sky.elapsed().as_secs_f64();
             (receivers, None, None)
         };
-        let (reflectance, emission) = system_materials(scene, mesh, &self.sky_exposure);
+        let (reflectance, emission) = system_materials(scene, mesh, &self.sky_irradiance);
         // Covered parts of elements neither emit nor reflect: the power formulation and the
         // residual use the open areas.
         self.area = receivers.open_areas(mesh);
@@ -455,17 +453,18 @@ impl Prepared {
             timings,
             refinement: self.refinement,
             warnings,
-            sky_exposure: self.sky_exposure,
+            sky_irradiance: self.sky_irradiance,
         }
     }
 }
 
-/// The sky exposure of every element when the scene has a lit sky (empty otherwise).
-fn sky_exposure(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, progress: &dyn Progress) -> Result<Vec<f64>> {
+/// The direct irradiance from the sky and its sun of every element when the scene has a
+/// lit sky (empty otherwise).
+fn sky_irradiance(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, progress: &dyn Progress) -> Result<Vec<Rgb>> {
     if scene.lit_sky().is_none() {
         return Ok(Vec::new());
     }
-    let (s, _) = crate::sky::exposure(mesh, rays, receivers, crate::sky::DEFAULT_AXIS, progress);
+    let (s, _) = crate::sky::element_irradiance(scene, mesh, rays, receivers, progress);
     if progress.should_stop() {
         return Err(Error::Cancelled);
     }
@@ -739,9 +738,9 @@ impl Solved {
     /// Indirect irradiance per element — light that has bounced at least once — and its
     /// per-vertex reconstruction (for the final gather). With form factors it is
     /// `(F·(B − E))_i`; without (stochastic solvers) it is `(B − E)/ρ` minus the direct
-    /// irradiance sampled at the element's receiver point and the sky's `π L_sky S_i`.
+    /// irradiance sampled at the element's receiver point and the sky's and sun's.
     pub fn indirect_irradiance(&self) -> (Vec<Rgb>, Vec<Rgb>) {
-        let (rho, emission) = system_materials(&self.scene, &self.mesh, &self.sky_exposure);
+        let (rho, emission) = system_materials(&self.scene, &self.mesh, &self.sky_irradiance);
         let b = self.solution.display_radiosity();
         let h: Vec<Rgb> = match &self.transport {
             Some(f) => indirect_irradiance(&self.scene, &self.mesh, f, &self.solution),
@@ -817,16 +816,16 @@ impl Solved {
     /// [`solve::EnergyBalance`]).
     pub fn energy(&self) -> EnergyReport {
         let mut e = EnergyReport::from(&self.solution.energy);
-        if let Some(sky) = self.scene.lit_sky() {
-            let open: f64 = self
+        if self.scene.lit_sky().is_some() {
+            let incident: Rgb = self
                 .mesh
                 .elements
                 .iter()
                 .zip(&self.receivers.open_fraction)
-                .zip(&self.sky_exposure)
-                .map(|((el, f), s)| el.area * f * s)
+                .zip(&self.sky_irradiance)
+                .map(|((el, f), h)| *h * (el.area * f))
                 .sum();
-            e.sky_incident = Some((sky.radiance * std::f64::consts::PI * open).to_array());
+            e.sky_incident = Some(incident.to_array());
         }
         e
     }

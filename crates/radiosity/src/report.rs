@@ -68,7 +68,7 @@ pub struct EnergyReport {
     pub unshot: [f64; 3],
     /// max over channels of |emitted − absorbed − escaped − back_faces − unshot| / emitted.
     pub imbalance: f64,
-    /// Under a sky: the sky's power reaching the surfaces, Σ π·L_sky·S_i·A_i. Its first
+    /// Under a sky: the sky's and sun's power reaching the surfaces directly, Σ H_sky,i·A_i. Its first
     /// reflection (ρ times it) is part of `emitted`: the system's sources are the surfaces'
     /// own emission plus that reflection.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -17,13 +17,21 @@
 //! over the element's open part), not as `1 − Σ_j F_ij`: the rows' own discretisation error
 //! would otherwise let the sky leak into closed rooms. The final gather estimates `S(x)`
 //! per pixel with its gather rays ([`crate::render::gather`]).
+//!
+//! A sun ([`crate::scene::Sun`]) adds `E_sun · max(0, n·ω) · V(x, ω)` averaged over the
+//! directions ω of its disk (uniform in solid angle): per element with rays from points
+//! spread over it ([`element_irradiance`]), per pixel with shadow rays in the final gather,
+//! so its shadows are sharp (penumbrae as wide as the disk) whatever the mesh.
 
 use rayon::prelude::*;
+
+use glam::DVec3;
 
 use crate::accel::SceneRays;
 use crate::mesh::{Mesh, Receivers, FINE_K};
 use crate::sampling::{basis, cosine_hemisphere, rng_for, stratified};
-use crate::Progress;
+use crate::scene::{Scene, Sun};
+use crate::{Progress, Rgb};
 
 /// Rays per element for the exposure, as `axis × axis` stratified directions.
 pub const DEFAULT_AXIS: usize = 8;
@@ -87,4 +95,102 @@ pub fn exposure(mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, axis: usiz
         .sum();
     progress.end();
     (s, cast)
+}
+
+/// A direction within the sun's disk for (u1, u2) ∈ [0,1)², uniform in solid angle.
+#[inline]
+pub fn sun_direction(sun: &Sun, u1: f64, u2: f64) -> DVec3 {
+    let cos_max = sun.cos_radius();
+    let cos_t = 1.0 - u1 * (1.0 - cos_max);
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let phi = 2.0 * std::f64::consts::PI * u2;
+    let (t, b) = basis(sun.direction);
+    (t * (sin_t * phi.cos()) + b * (sin_t * phi.sin()) + sun.direction * cos_t).normalize()
+}
+
+/// The sun's direct irradiance at `p` (normal `n`, on polygon `patch`) per unit of its
+/// irradiance: the mean of `max(0, n·ω) · V(p, ω)` over directions `ω` of the disk through
+/// the unit-square points `pts`. Also returns the rays cast.
+#[inline]
+pub fn sun_factor_at(rays: &SceneRays, sun: &Sun, p: DVec3, n: DVec3, patch: u32, pts: &[(f64, f64)]) -> (f64, u64) {
+    if pts.is_empty() || n.dot(sun.direction) <= -0.5 * sun.angular_diameter_deg.to_radians().sin() {
+        return (0.0, 0);
+    }
+    let mut sum = 0.0;
+    let mut cast = 0;
+    for &(u1, u2) in pts {
+        let d = sun_direction(sun, u1, u2);
+        let c = n.dot(d);
+        if c <= 0.0 {
+            continue;
+        }
+        cast += 1;
+        if rays.escapes(p.as_vec3(), d.as_vec3(), Some(patch)) {
+            sum += c;
+        }
+    }
+    (sum / pts.len() as f64, cast)
+}
+
+/// The irradiance the sky and its sun bring to every element directly (none without a lit
+/// sky): `π·L_sky·S_i + E_sun·⟨max(0, n·ω)·V⟩_i`, the sun's term from `axis × axis` points of
+/// the element's open part, each with its own direction in the disk. Also returns the rays.
+pub fn element_irradiance(
+    scene: &Scene,
+    mesh: &Mesh,
+    rays: &SceneRays,
+    receivers: &Receivers,
+    progress: &dyn Progress,
+) -> (Vec<Rgb>, u64) {
+    let Some(sky) = scene.lit_sky() else {
+        return (Vec::new(), 0);
+    };
+    let mut cast = 0;
+    let mut h = vec![Rgb::ZERO; mesh.len()];
+    if sky.radiance.max_element() > 0.0 {
+        let (s, n) = exposure(mesh, rays, receivers, DEFAULT_AXIS, progress);
+        cast += n;
+        for (h, s) in h.iter_mut().zip(s) {
+            *h += sky.radiance * (std::f64::consts::PI * s);
+        }
+    }
+    if let Some(sun) = sky.lit_sun() {
+        use rand::RngExt;
+        progress.begin("sun", mesh.len() as u64);
+        let f: Vec<(f64, u64)> = (0..mesh.len())
+            .into_par_iter()
+            .map(|e| {
+                let el = &mesh.elements[e];
+                let open = receivers.open_cells.get(e).copied().unwrap_or(u64::MAX);
+                if open == 0 || progress.should_stop() {
+                    return (0.0, 0);
+                }
+                let mut rng = rng_for(SEED ^ 0x5a4e, e as u64);
+                let mut dirs = Vec::new();
+                stratified(DEFAULT_AXIS, &mut rng, &mut dirs);
+                let (mut sum, mut n) = (0.0, 0);
+                for &(u1, u2) in &dirs {
+                    let (ru, rv): (f64, f64) = (rng.random(), rng.random());
+                    let (u, v) = if open == u64::MAX {
+                        (ru, rv)
+                    } else {
+                        let cell = rng.random_range(0..open.count_ones());
+                        let (u0, v0) = receivers.open_cell(e, cell).expect("an open cell");
+                        (u0 + ru / FINE_K as f64, v0 + rv / FINE_K as f64)
+                    };
+                    let p = el.point(&mesh.positions, u, v);
+                    let (f, c) = sun_factor_at(rays, &sun, p, el.normal, el.patch, &[(u1, u2)]);
+                    sum += f;
+                    n += c;
+                }
+                (sum / dirs.len() as f64, n)
+            })
+            .collect();
+        progress.end();
+        for (h, (f, n)) in h.iter_mut().zip(f) {
+            *h += sun.irradiance * f;
+            cast += n;
+        }
+    }
+    (h, cast)
 }

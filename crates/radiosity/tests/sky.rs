@@ -54,7 +54,7 @@ fn open_box(h: f64, wall_rho: f64, lid: Option<f64>, sky: Option<f64>) -> Scene 
         let _ = k;
         d.polygons.push(PolygonDesc { vertices: f, material, object, loc: None });
     }
-    d.sky = sky.map(|l| Sky { radiance: Rgb::splat(l) });
+    d.sky = sky.map(|l| Sky { radiance: Rgb::splat(l), sun: None });
     Scene::from_desc(d).unwrap()
 }
 
@@ -110,11 +110,11 @@ fn open_box_under_the_sky_matches_the_box_closed_by_a_black_emitting_lid() {
             .mesh
             .elements
             .iter()
-            .zip(&sky.sky_exposure)
+            .zip(&sky.sky_irradiance)
             .zip(&sky.receivers.open_fraction)
-            .map(|((el, s), f)| {
+            .map(|((el, h), f)| {
                 let rho = sky.scene.materials[sky.scene.polygons[el.patch as usize].material as usize].reflectance.x;
-                rho * PI * s * el.area * f
+                rho * h.x * el.area * f
             })
             .sum();
         assert!((e - expect).abs() <= 1e-9 * expect, "emitted {e} against the sky's first reflection {expect}");
@@ -135,11 +135,11 @@ fn no_sky_light_enters_a_closed_room() {
     for f in common::box_faces(DVec3::splat(0.3), DVec3::splat(0.6), false) {
         d.polygons.push(PolygonDesc { vertices: f, material: 1, object: 1, loc: None });
     }
-    d.sky = Some(Sky { radiance: Rgb::ONE });
+    d.sky = Some(Sky { radiance: Rgb::ONE, sun: None });
     let scene = Scene::from_desc(d).unwrap();
     scene.check_emits().expect("a sky is a light");
     let solved = solve_scene(scene, &Settings { mesh_size: Some(0.1), ..Default::default() }, &NoProgress).unwrap();
-    assert!(solved.sky_exposure.iter().all(|&s| s == 0.0), "sky exposure inside a closed room");
+    assert!(solved.sky_irradiance.iter().all(|&h| h == Rgb::ZERO), "sky light inside a closed room");
     assert!(solved.solution.radiosity.iter().all(|b| *b == Rgb::ZERO));
 }
 
@@ -151,10 +151,10 @@ fn final_gather_shows_the_sky_and_a_plate_lit_by_it_exactly() {
     d.objects.push(ObjectDesc { name: "plate".into(), loc: None });
     let v = vec![DVec3::new(0., 0., 0.), DVec3::new(0., 0., 1.), DVec3::new(1., 0., 1.), DVec3::new(1., 0., 0.)];
     d.polygons.push(PolygonDesc { vertices: v, material: 0, object: 0, loc: None });
-    d.sky = Some(Sky { radiance: Rgb::splat(l_sky) });
+    d.sky = Some(Sky { radiance: Rgb::splat(l_sky), sun: None });
     let scene = Scene::from_desc(d).unwrap();
     let solved = solve_scene(scene, &Settings { mesh_size: Some(0.1), ..Default::default() }, &NoProgress).unwrap();
-    assert!(solved.sky_exposure.iter().all(|&s| s == 1.0));
+    assert!(solved.sky_irradiance.iter().all(|&h| h == Rgb::splat(PI * l_sky)));
     // The plate fills the middle of the view; the corners see only sky.
     let cam = Camera { position: DVec3::new(0.5, 1.0, 0.5), look_at: DVec3::new(0.5, 0.0, 0.5), up: DVec3::Z, vfov_deg: 90.0 };
     let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
@@ -209,7 +209,7 @@ fn closed_two_sided_room_leak(cluster_receivers: bool) -> (f64, f64, usize) {
     for f in common::box_faces(DVec3::new(0.3, 0.0, 0.3), DVec3::new(0.7, 0.4, 0.7), false) {
         d.polygons.push(PolygonDesc { vertices: f, material: 0, object: 1, loc: None });
     }
-    d.sky = Some(Sky { radiance: Rgb::ONE });
+    d.sky = Some(Sky { radiance: Rgb::ONE, sun: None });
     let scene = Scene::from_desc(d).unwrap();
     let mut s = settings(Kind::Hierarchical, form_factor::Method::PointSampled, Solver::Jacobi);
     s.links.min_size = Some(0.4);
@@ -250,4 +250,98 @@ fn sky_light_does_not_leak_through_two_sided_walls_into_a_closed_room() {
 fn sky_light_does_not_leak_through_walls_with_cluster_receivers() {
     let (inside, outside, _) = closed_two_sided_room_leak(true);
     assert!(inside <= 1e-6 * outside, "sky light inside a closed room: B up to {inside:e}");
+}
+
+fn sun_scene(direction: DVec3, with_roof: bool) -> Scene {
+    let mut d = SceneDesc { name: "sun".into(), ..Default::default() };
+    d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
+    d.objects.push(ObjectDesc { name: "floor".into(), loc: None });
+    let floor = vec![DVec3::new(0., 0., 0.), DVec3::new(0., 0., 2.), DVec3::new(2., 0., 2.), DVec3::new(2., 0., 0.)];
+    d.polygons.push(PolygonDesc { vertices: floor, material: 0, object: 0, loc: None });
+    if with_roof {
+        // A one-sided square 0.5 on a side at height 1 over the floor's centre, facing up.
+        d.objects.push(ObjectDesc { name: "roof".into(), loc: None });
+        let roof =
+            vec![DVec3::new(0.75, 1., 0.75), DVec3::new(0.75, 1., 1.25), DVec3::new(1.25, 1., 1.25), DVec3::new(1.25, 1., 0.75)];
+        d.polygons.push(PolygonDesc { vertices: roof, material: 0, object: 1, loc: None });
+    }
+    let sun = radiosity::scene::Sun { direction, irradiance: Rgb::splat(100.0), angular_diameter_deg: 0.53 };
+    d.sky = Some(Sky { radiance: Rgb::ZERO, sun: Some(sun) });
+    Scene::from_desc(d).unwrap()
+}
+
+/// A floor under a sun 60° from the zenith: irradiance E·cos 60°, so L = ρ·E·cos θ/π on
+/// every element, and the sun's power on the floor is E·cos θ·A.
+#[test]
+fn sun_lights_an_open_floor_by_the_cosine_law() {
+    let t = 60f64.to_radians();
+    let scene = sun_scene(DVec3::new(t.sin(), t.cos(), 0.0), false);
+    let solved = solve_scene(scene, &Settings { mesh_size: Some(0.2), ..Default::default() }, &NoProgress).unwrap();
+    // The disk's mean cosine is cos θ·(1 + cos r)/2; its 8 × 8 directions per element sample
+    // the ±r·tan θ = ±0.8 % spread across it.
+    let cos_r = solved.scene.sky.unwrap().sun.unwrap().cos_radius();
+    let exact = 0.5 * 100.0 * t.cos() * 0.5 * (1.0 + cos_r) / PI;
+    for b in solved.solution.display_radiosity() {
+        assert!((b.x / PI - exact).abs() < 1e-3 * exact, "L {} against {exact}", b.x / PI);
+    }
+    let incident = solved.energy().sky_incident.unwrap()[0];
+    assert!((incident - 100.0 * t.cos() * 4.0).abs() < 1e-3 * incident, "sun power on the floor {incident}");
+}
+
+/// A roof over the floor with the sun overhead: the floor is dark in its shadow and fully
+/// lit outside it, element by element and point by point (the final gather's estimate).
+#[test]
+fn sun_casts_a_sharp_shadow() {
+    let solved = solve_scene(sun_scene(DVec3::Y, true), &Settings { mesh_size: Some(0.05), ..Default::default() }, &NoProgress)
+        .unwrap();
+    let b = solved.solution.display_radiosity();
+    // Overhead, the disk's mean cosine is (1 + cos r)/2.
+    let lit_b = 0.5 * 100.0 * 0.5 * (1.0 + solved.scene.sky.unwrap().sun.unwrap().cos_radius());
+    let (mut shadow, mut lit) = (0, 0);
+    for (i, e) in solved.mesh.elements.iter().enumerate() {
+        if e.normal.y < 0.5 || e.centroid.y > 0.5 {
+            continue; // the roof
+        }
+        let (dx, dz) = ((e.centroid.x - 1.0).abs(), (e.centroid.z - 1.0).abs());
+        if dx < 0.2 && dz < 0.2 {
+            shadow += 1;
+            assert_eq!(b[i].x, 0.0, "element at {:?} in the shadow", e.centroid);
+        } else if dx > 0.3 || dz > 0.3 {
+            lit += 1;
+            assert!((b[i].x - lit_b).abs() < 1e-6 * lit_b, "element at {:?}: B {} against {lit_b}", e.centroid, b[i].x);
+        }
+    }
+    assert!(shadow > 40 && lit > 1000, "{shadow} shadowed, {lit} lit elements");
+    let sun = solved.scene.sky.unwrap().sun.unwrap();
+    let pts: Vec<(f64, f64)> = (0..16).map(|k| ((k % 4) as f64 / 4.0 + 0.1, (k / 4) as f64 / 4.0 + 0.1)).collect();
+    let floor = solved.mesh.elements.iter().find(|e| e.normal.y > 0.5 && e.centroid.y < 0.5).unwrap().patch;
+    for (x, expect) in [(1.0, 0.0), (1.2, 0.0), (1.3, 1.0), (0.2, 1.0)] {
+        let (f, _) = radiosity::sky::sun_factor_at(&solved.rays, &sun, DVec3::new(x, 0.0, 1.0), DVec3::Y, floor, &pts);
+        assert!((f - expect).abs() < 1e-5, "sun factor at x = {x}: {f}");
+    }
+}
+
+/// The final gather under a sun: every visible floor point shows ρ·E·cos θ/π (the shadow
+/// rays all reach the disk), and a camera looking into the disk sees its radiance E/Ω.
+#[test]
+fn final_gather_shows_the_sunlit_floor_and_the_sun() {
+    let t = 30f64.to_radians();
+    let dir = DVec3::new(t.sin(), t.cos(), 0.0);
+    let solved = solve_scene(sun_scene(dir, false), &Settings { mesh_size: Some(0.2), ..Default::default() }, &NoProgress).unwrap();
+    let sun = solved.scene.sky.unwrap().sun.unwrap();
+    let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
+    let tracer = ElementTracer::new(&solved.mesh, &two);
+    let opts = radiosity::render::gather::Options { width: 16, height: 16, spp_axis: 2, shadow_axis: 2, gather_axis: 2, seed: 5 };
+    let exact = 0.5 * 100.0 * t.cos() * 0.5 * (1.0 + sun.cos_radius()) / PI;
+    let down = Camera { position: DVec3::new(1.0, 1.0, 1.0), look_at: DVec3::new(1.0, 0.0, 1.0), up: DVec3::Z, vfov_deg: 60.0 };
+    let indirect = solved.indirect(true);
+    let (img, _) = solved.render_gather(&down, &opts, &tracer, &indirect, &NoProgress);
+    for p in &img.pixels {
+        assert!((p.x - exact).abs() < 2e-3 * exact, "floor pixel {} against {exact}", p.x);
+    }
+    // Into the disk (0.53°) with a 0.2° field of view: every pixel is the sun.
+    let up = Camera { position: DVec3::new(1.0, 0.5, 1.0), look_at: DVec3::new(1.0, 0.5, 1.0) + dir, up: DVec3::Z, vfov_deg: 0.2 };
+    let (img, _) = solved.render_gather(&up, &opts, &tracer, &indirect, &NoProgress);
+    let l = sun.radiance().x;
+    assert!(img.pixels.iter().all(|p| (p.x - l).abs() < 1e-9 * l), "sun pixels {} against {l}", img.pixels[0].x);
 }

@@ -34,7 +34,9 @@
 //! radiance, and the sky's direct irradiance `π L_sky S(x)` ([`crate::sky`]) is estimated
 //! per position by cosine-distributed rays: the gather rays themselves when gathering (a
 //! ray that leaves the scene reads `π L_sky` where one that meets an element reads its
-//! `B − E`), [`SKY_AXIS`]² rays of their own per position when interpolating.
+//! `B − E`), [`SKY_AXIS`]² rays of their own per position when interpolating. A sun adds
+//! `E_sun · max(0, n·ω) · V` per position with `shadow × shadow` rays in its disk (sharp
+//! shadows), and a camera ray that meets its disk shows its radiance.
 //!
 //! Pixels average `spp × spp` stratified positions (box filter); shadow and gather rays are
 //! stratified over the whole pixel; each pixel draws its own random stream (seed, pixel),
@@ -123,6 +125,7 @@ pub fn render(
     let inv_pi = 1.0 / std::f64::consts::PI;
     let ems = emitters(scene);
     let sky = scene.lit_sky().map(|s| s.radiance);
+    let sun = scene.lit_sky().and_then(|s| s.lit_sun());
     // Exitance of the sky seen by a gather ray that leaves the scene.
     let sky_h = sky.map_or(Rgb::ZERO, |l| l * std::f64::consts::PI);
     progress.begin("final gather", h as u64);
@@ -152,6 +155,7 @@ pub fn render(
             };
             let g2 = g * g;
             let mut gather_pattern = Vec::new();
+            let mut sun_pattern = Vec::new();
             let mut scratch = Vec::new();
             for (x, px) in row.iter_mut().enumerate() {
                 let mut rng = rng_for(opts.seed, (y * w + x) as u64);
@@ -162,12 +166,20 @@ pub fn render(
                 if g > 0 {
                     pixel_pattern(s * g, &mut rng, &mut gather_pattern);
                 }
+                if sun.is_some() {
+                    pixel_pattern(s * opts.shadow_axis.max(1), &mut rng, &mut sun_pattern);
+                }
                 let mut acc = Rgb::ZERO;
                 for (k, &(sx, sy)) in sub.iter().enumerate() {
                     let dir = cam.direction(x as f64 + sx, y as f64 + sy);
                     nrays += 1;
                     let Some((e, p)) = tracer.trace(cam.eye, dir) else {
                         acc += sky.unwrap_or(Rgb::ZERO);
+                        if let Some(sun) = &sun {
+                            if dir.normalize().dot(sun.direction) >= sun.cos_radius() && sun.angular_diameter_deg > 0.0 {
+                                acc += sun.radiance();
+                            }
+                        }
                         continue;
                     };
                     let el = &mesh.elements[e as usize];
@@ -187,6 +199,13 @@ pub fn render(
                             direct_irradiance_sampled(scene, rays, &ems, p, el.normal, el.patch, pat, &mut scratch)
                         };
                         nrays += r;
+                        let mut hd = hd;
+                        if let Some(sun) = &sun {
+                            let pts = &sun_pattern[k * m2..(k + 1) * m2];
+                            let (f, r) = crate::sky::sun_factor_at(rays, sun, p, el.normal, el.patch, pts);
+                            hd += sun.irradiance * f;
+                            nrays += r;
+                        }
                         let dirs = &gather_pattern[k * g2..(k + 1) * g2];
                         nrays += g2 as u64;
                         let hi = match indirect {

@@ -21,6 +21,7 @@ pub mod gltf;
 pub mod obj;
 pub mod toml_file;
 mod validate;
+pub use validate::MAX_SUN_DIAMETER_DEG;
 pub mod vs3;
 
 use std::io::Read as _;
@@ -188,12 +189,50 @@ pub struct PolygonDesc {
 pub struct Sky {
     /// Radiance of the sky, linear RGB (same units as `Ke`).
     pub radiance: Rgb,
+    /// A sun: a distant disk of light, seen by rays that leave the scene towards it.
+    pub sun: Option<Sun>,
+}
+
+/// The sun of a [`Sky`]: a disk of uniform radiance at infinity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sun {
+    /// Unit vector from the scene towards the sun's centre.
+    pub direction: DVec3,
+    /// Irradiance on a surface facing the sun, unshadowed (W/m² per channel in the units
+    /// of exitance, E = π·Ke): a surface with normal `n` gets `E · max(0, n·direction)`.
+    pub irradiance: Rgb,
+    /// Angular diameter of the disk, degrees (the real sun: 0.53; 0 is a point).
+    pub angular_diameter_deg: f64,
+}
+
+impl Sun {
+    /// Cosine of the disk's angular radius.
+    pub fn cos_radius(&self) -> f64 {
+        (0.5 * self.angular_diameter_deg).to_radians().cos()
+    }
+
+    /// Radiance of the disk (irradiance over its solid angle), for a camera ray that meets
+    /// it; infinite for a point sun (never met).
+    pub fn radiance(&self) -> Rgb {
+        let omega = 2.0 * std::f64::consts::PI * (1.0 - self.cos_radius());
+        self.irradiance / omega
+    }
+
+    /// True if the sun gives light.
+    pub fn is_lit(&self) -> bool {
+        self.irradiance.max_element() > 0.0
+    }
 }
 
 impl Sky {
-    /// True if the sky gives light.
+    /// True if the sky or its sun gives light.
     pub fn is_lit(&self) -> bool {
-        self.radiance.max_element() > 0.0
+        self.radiance.max_element() > 0.0 || self.sun.is_some_and(|s| s.is_lit())
+    }
+
+    /// The sun, if it gives light.
+    pub fn lit_sun(&self) -> Option<Sun> {
+        self.sun.filter(Sun::is_lit)
     }
 }
 

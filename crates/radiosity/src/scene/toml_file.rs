@@ -21,6 +21,10 @@
 //! [sky]                        # optional: a uniform sky around the geometry
 //! radiance = 1.0               # radiance of every direction that sees no polygon
 //!                              # (one value or [r, g, b]; same units as emission)
+//! [sky.sun]                    # optional: a sun (with or without a sky radiance)
+//! direction = [0.3, 1, 0.2]    # towards the sun (normalised)
+//! irradiance = 1000            # on a surface facing it, unshadowed (exitance units)
+//! angular_diameter = 0.53      # degrees, 0 to 20 (default 0.53)
 //! ```
 //!
 //! Material names that are not bare TOML keys are quoted: `[materials."wall 1"]`. An
@@ -50,6 +54,9 @@ use toml::Spanned;
 use super::{builtin, gltf, obj, Camera, MaterialDesc, SceneDesc};
 use crate::{Error, Location, Result, Rgb};
 
+/// The sun's angular diameter when `[sky.sun]` gives none, degrees (the real sun's).
+pub const DEFAULT_SUN_DIAMETER_DEG: f64 = 0.53;
+
 /// The prefix that names a built-in scene as a mesh (`mesh = "builtin:cornell"`).
 pub const BUILTIN_PREFIX: &str = "builtin:";
 
@@ -68,7 +75,16 @@ struct FileToml {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SkyToml {
-    radiance: Spanned<Radiance>,
+    radiance: Option<Spanned<Radiance>>,
+    sun: Option<Spanned<SunToml>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SunToml {
+    direction: Spanned<[f64; 3]>,
+    irradiance: Spanned<Radiance>,
+    angular_diameter: Option<Spanned<f64>>,
 }
 
 /// One value for every channel, or `[r, g, b]`.
@@ -226,15 +242,56 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
 
     // Material overrides.
     if let Some(sky) = &spec.sky {
-        let r = &sky.get_ref().radiance;
-        let v = match r.get_ref() {
-            Radiance::Grey(g) => [*g; 3],
-            Radiance::Rgb(c) => *c,
+        let rgb = |r: &Spanned<Radiance>, what: &str| -> Result<Rgb> {
+            let v = match r.get_ref() {
+                Radiance::Grey(g) => [*g; 3],
+                Radiance::Rgb(c) => *c,
+            };
+            if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
+                return Err(Error::input(at(r.span()), format!("[sky]: {what} {v:?} must be finite and non-negative")));
+            }
+            Ok(Rgb::from_array(v))
         };
-        if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
-            return Err(Error::input(at(r.span()), format!("[sky]: radiance {v:?} must be finite and non-negative")));
+        let radiance = match &sky.get_ref().radiance {
+            Some(r) => rgb(r, "radiance")?,
+            None => Rgb::ZERO,
+        };
+        let sun = match &sky.get_ref().sun {
+            None => None,
+            Some(sun) => {
+                let sun = sun.get_ref();
+                let d = DVec3::from_array(*sun.direction.get_ref());
+                if !d.is_finite() || d.length() < 1e-12 {
+                    return Err(Error::input(
+                        at(sun.direction.span()),
+                        format!("[sky.sun]: direction {:?} must be a finite, non-zero vector towards the sun", d.to_array()),
+                    ));
+                }
+                let diameter = match &sun.angular_diameter {
+                    Some(a) if !(0.0..=super::validate::MAX_SUN_DIAMETER_DEG).contains(a.get_ref()) => {
+                        return Err(Error::input(
+                            at(a.span()),
+                            format!(
+                                "[sky.sun]: angular_diameter {} must be between 0 and {} degrees",
+                                a.get_ref(),
+                                super::validate::MAX_SUN_DIAMETER_DEG
+                            ),
+                        ))
+                    }
+                    Some(a) => *a.get_ref(),
+                    None => DEFAULT_SUN_DIAMETER_DEG,
+                };
+                Some(super::Sun {
+                    direction: d.normalize(),
+                    irradiance: rgb(&sun.irradiance, "sun irradiance")?,
+                    angular_diameter_deg: diameter,
+                })
+            }
+        };
+        if sky.get_ref().radiance.is_none() && sun.is_none() {
+            return Err(Error::input(at(sky.span()), "[sky]: give a radiance, a [sky.sun], or both"));
         }
-        desc.sky = Some(super::Sky { radiance: Rgb::from_array(v) });
+        desc.sky = Some(super::Sky { radiance, sun });
     }
 
     for (name, ov) in &spec.materials {
@@ -394,15 +451,26 @@ mod tests {
     #[test]
     fn sky_takes_one_radiance_or_three_and_checks_them() {
         let d = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = 1.5\n").unwrap();
-        assert_eq!(d.sky, Some(crate::scene::Sky { radiance: Rgb::splat(1.5) }));
+        assert_eq!(d.sky, Some(crate::scene::Sky { radiance: Rgb::splat(1.5), sun: None }));
         let d = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = [0.1, 0.2, 0.3]\n").unwrap();
-        assert_eq!(d.sky, Some(crate::scene::Sky { radiance: Rgb::new(0.1, 0.2, 0.3) }));
+        assert_eq!(d.sky, Some(crate::scene::Sky { radiance: Rgb::new(0.1, 0.2, 0.3), sun: None }));
+        let d = parse("mesh = \"builtin:cornell\"\n[sky.sun]\ndirection = [0, 2, 0]\nirradiance = 100\n").unwrap();
+        let sun = d.sky.unwrap().sun.unwrap();
+        assert_eq!((sun.direction, sun.irradiance, sun.angular_diameter_deg), (DVec3::Y, Rgb::splat(100.0), 0.53));
+        assert_eq!(d.sky.unwrap().radiance, Rgb::ZERO);
+        let e = parse("mesh = \"builtin:cornell\"\n[sky.sun]\ndirection = [0, 0, 0]\nirradiance = 1\n").unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("non-zero"), "{e}");
+        let e = parse("mesh = \"builtin:cornell\"\n[sky.sun]\ndirection = [0, 1, 0]\nirradiance = 1\nangular_diameter = 90\n")
+            .unwrap_err();
+        assert!(e.to_string().starts_with("s.toml:5:") && e.to_string().contains("between 0 and 20"), "{e}");
+        let e = parse("mesh = \"builtin:cornell\"\n[sky]\n").unwrap_err();
+        assert!(e.to_string().contains("give a radiance"), "{e}");
         assert_eq!(parse("mesh = \"builtin:cornell\"\n").unwrap().sky, None);
         let e = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = [1, -2, 3]\n").unwrap_err();
         assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("non-negative"), "{e}");
         let e = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = inf\n").unwrap_err();
         assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("finite"), "{e}");
-        let e = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = 1\nsun = 2\n").unwrap_err();
+        let e = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = 1\nsuns = 2\n").unwrap_err();
         assert!(e.to_string().starts_with("s.toml:4:1:"), "{e}");
         let e = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = [1, 2]\n").unwrap_err();
         assert!(e.to_string().starts_with("s.toml:3:"), "{e}");

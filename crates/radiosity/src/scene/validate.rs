@@ -7,6 +7,9 @@ use glam::{DVec2, DVec3};
 use super::{Material, Object, Polygon, Scene, SceneDesc, MAX_COORDINATE, MAX_EMISSION, MAX_POLYGON_VERTICES, MAX_REFLECTANCE};
 use crate::{Error, Location, Result, Warning};
 
+/// Largest angular diameter of a sun, degrees (a disk much wider is a sky, not a sun).
+pub const MAX_SUN_DIAMETER_DEG: f64 = 20.0;
+
 /// Relative out-of-plane distance (to the polygon's diameter) above which a polygon is
 /// treated as non-planar and split into triangles.
 pub const PLANARITY_TOL: f64 = 1e-6;
@@ -85,7 +88,29 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
                 format!("sky radiance {e:?} must be finite, non-negative and at most {MAX_EMISSION:e}"),
             ));
         }
+        if let Some(sun) = &sky.sun {
+            let e = sun.irradiance.to_array();
+            let d = sun.direction;
+            let why = if e.iter().any(|c| !c.is_finite() || *c < 0.0 || *c > MAX_EMISSION) {
+                Some(format!("irradiance {e:?} must be finite, non-negative and at most {MAX_EMISSION:e}"))
+            } else if !d.is_finite() || d.length() < 1e-12 {
+                Some(format!("direction {:?} must be a finite, non-zero vector", d.to_array()))
+            } else if !(0.0..=MAX_SUN_DIAMETER_DEG).contains(&sun.angular_diameter_deg) {
+                Some(format!("angular diameter {} must be between 0 and {MAX_SUN_DIAMETER_DEG} degrees", sun.angular_diameter_deg))
+            } else {
+                None
+            };
+            if let Some(why) = why {
+                return Err(Error::input(Location::file(&file), format!("sun: {why}")));
+            }
+        }
     }
+    let sky = sky.map(|mut s| {
+        if let Some(sun) = &mut s.sun {
+            sun.direction = sun.direction.normalize();
+        }
+        s
+    });
     if !capped.is_empty() {
         warnings.push(Warning {
             loc: Some(Location::file(&file)),
