@@ -880,6 +880,15 @@ impl Ctx<'_> {
                 return; // R behind S
             }
         }
+        // A cluster that emits unequally is never a source (as for surface receivers): its
+        // first-order directional reading mixes faces the receiver cannot see. Under a sky a
+        // slab's lit roof and dark ceiling, read by a floor cluster inside, leaked light into
+        // a closed room (max B 5.6e-2 against 1.58 outside; `tests/sky.rs`).
+        if !ns.surface && self.emits[s as usize] && !ns.is_leaf() {
+            stack.push((r, ns.child[0]));
+            stack.push((r, ns.child[1]));
+            return;
+        }
         let ratio = separation_ratio(nr, ns);
         // A cluster takes no light from concentrated emitters (it must be split down to
         // surfaces for that, whatever its size).
