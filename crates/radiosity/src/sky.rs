@@ -28,7 +28,8 @@ use rayon::prelude::*;
 use glam::DVec3;
 
 use crate::accel::SceneRays;
-use crate::mesh::{Mesh, Receivers, FINE_K};
+use crate::mesh::{Mesh, Receivers};
+use crate::sampling::Rng;
 use crate::sampling::{basis, cosine_hemisphere, rng_for, stratified};
 use crate::scene::{Scene, Sun};
 use crate::{Progress, Rgb};
@@ -44,7 +45,6 @@ const SEED: u64 = 0x5c1e_5c1e;
 /// the element's open part (area-uniform within a random open cell). Stops early, leaving
 /// zeros, when `progress` asks to.
 pub fn exposure(mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, axis: usize, progress: &dyn Progress) -> (Vec<f64>, u64) {
-    use rand::RngExt;
     let axis = axis.max(1);
     let n = mesh.len();
     const CHUNK: usize = 1024;
@@ -71,15 +71,7 @@ pub fn exposure(mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, axis: usiz
                 let (t, b) = basis(el.normal);
                 let mut seen = 0usize;
                 for &(u1, u2) in &dirs {
-                    let (ru, rv): (f64, f64) = (rng.random(), rng.random());
-                    let (u, v) = if open == u64::MAX {
-                        (ru, rv)
-                    } else {
-                        let cell = rng.random_range(0..open.count_ones());
-                        let (u0, v0) = receivers.open_cell(e, cell).expect("an open cell");
-                        (u0 + ru / FINE_K as f64, v0 + rv / FINE_K as f64)
-                    };
-                    let p = el.point(&mesh.positions, u, v);
+                    let p = open_point(mesh, receivers, e, &mut rng);
                     let d = cosine_hemisphere(u1, u2);
                     let dir = t * d.x + b * d.y + el.normal * d.z;
                     if rays.escapes(p.as_vec3(), dir.as_vec3(), Some(el.patch)) {
@@ -95,6 +87,14 @@ pub fn exposure(mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, axis: usiz
         .sum();
     progress.end();
     (s, cast)
+}
+
+/// An area-uniform random point of element `e`'s open part.
+#[inline]
+fn open_point(mesh: &Mesh, receivers: &Receivers, e: usize, rng: &mut Rng) -> DVec3 {
+    use rand::RngExt;
+    let (u, v) = receivers.open_uv(e, rng.random(), rng.random(), || rng.random());
+    mesh.elements[e].point(&mesh.positions, u, v)
 }
 
 /// A direction within the sun's disk for (u1, u2) ∈ [0,1)², uniform in solid angle.
@@ -155,7 +155,6 @@ pub fn element_irradiance(
         }
     }
     if let Some(sun) = sky.lit_sun() {
-        use rand::RngExt;
         progress.begin("sun", mesh.len() as u64);
         let f: Vec<(f64, u64)> = (0..mesh.len())
             .into_par_iter()
@@ -170,15 +169,7 @@ pub fn element_irradiance(
                 stratified(DEFAULT_AXIS, &mut rng, &mut dirs);
                 let (mut sum, mut n) = (0.0, 0);
                 for &(u1, u2) in &dirs {
-                    let (ru, rv): (f64, f64) = (rng.random(), rng.random());
-                    let (u, v) = if open == u64::MAX {
-                        (ru, rv)
-                    } else {
-                        let cell = rng.random_range(0..open.count_ones());
-                        let (u0, v0) = receivers.open_cell(e, cell).expect("an open cell");
-                        (u0 + ru / FINE_K as f64, v0 + rv / FINE_K as f64)
-                    };
-                    let p = el.point(&mesh.positions, u, v);
+                    let p = open_point(mesh, receivers, e, &mut rng);
                     let (f, c) = sun_factor_at(rays, &sun, p, el.normal, el.patch, &[(u1, u2)]);
                     sum += f;
                     n += c;

@@ -116,6 +116,23 @@ impl Receivers {
         Some(((b % FINE_K) as f64 / FINE_K as f64, (b / FINE_K) as f64 / FINE_K as f64))
     }
 
+    /// The unit-square point `(u, v)` moved into element `e`'s open part: into its open cell
+    /// numbered `pick() × (open cells)` (the cells are equal, so uniform `u`, `v` and `pick`
+    /// give points uniform over the open part); unchanged when the element is all open or
+    /// all covered (`pick` is then not called).
+    #[inline]
+    pub fn open_uv(&self, e: usize, u: f64, v: f64, pick: impl FnOnce() -> f64) -> (f64, f64) {
+        let cells = self.open_cells[e];
+        if cells == u64::MAX {
+            return (u, v);
+        }
+        let k = (pick() * cells.count_ones() as f64) as u32;
+        match self.open_cell(e, k) {
+            Some((u0, v0)) => (u0 + u / FINE_K as f64, v0 + v / FINE_K as f64),
+            None => (u, v),
+        }
+    }
+
     /// Receivers with the coverage test.
     pub fn compute(scene: &Scene, mesh: &Mesh, rays: &SceneRays) -> Receivers {
         Self::compute_with(scene, mesh, rays, &crate::NoProgress)

@@ -34,7 +34,7 @@ use rayon::prelude::*;
 
 use super::{EnergyBalance, Monitor, Observer, Options, Solution, Solver};
 use crate::accel::SceneRays;
-use crate::mesh::{Locator, Mesh, Receivers, FINE_K};
+use crate::mesh::{Locator, Mesh, Receivers};
 use crate::sampling::{basis, cosine_hemisphere, mix64, rng_for};
 use crate::{luminance, Error, Progress, Result, Rgb};
 
@@ -228,18 +228,11 @@ impl<'a> Shooter<'a> {
                 j += 1;
             }
             let e = &mesh.elements[j];
-            let (mut u, mut v, u1, u2): (f64, f64, f64, f64) = (rng.random(), rng.random(), rng.random(), rng.random());
+            let (u, v, u1, u2): (f64, f64, f64, f64) = (rng.random(), rng.random(), rng.random(), rng.random());
             // A partly covered element sends from its open cells only, in proportion to
             // their (equal) areas: sent from its whole area, the covered part poured power
             // into the inside of the solid it touches (issue 9).
-            let cells = recv.open_cells[j];
-            if cells != u64::MAX {
-                let k = (rng.random::<f64>() * cells.count_ones() as f64) as u32;
-                if let Some((u0, v0)) = recv.open_cell(j, k) {
-                    u = u0 + u / FINE_K as f64;
-                    v = v0 + v / FINE_K as f64;
-                }
-            }
+            let (u, v) = recv.open_uv(j, u, v, || rng.random());
             let x = e.point(&mesh.positions, u, v);
             let (t, b) = basis(e.normal);
             let d = cosine_hemisphere(u1, u2);
