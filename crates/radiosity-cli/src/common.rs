@@ -546,8 +546,15 @@ pub fn energy_summary(e: &radiosity::report::EnergyReport) -> String {
         pct(e.unshot),
         e.imbalance
     );
-    match e.sky_incident {
-        Some(s) => format!("{line}\n        sky: {:.4e} reaches the surfaces; its first reflection is part of the emitted", lum(s)),
+    let lights = match e.lights_power {
+        Some(p) => format!(" (the point and spot lights send {:.4e})", lum(p)),
+        None => String::new(),
+    };
+    match e.external_incident {
+        Some(s) => format!(
+            "{line}\n        sky and lights: {:.4e} reaches the surfaces directly{lights}; its first reflection is part of the emitted",
+            lum(s)
+        ),
         None => line,
     }
 }

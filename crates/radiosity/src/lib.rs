@@ -26,6 +26,7 @@ pub mod direct;
 pub mod error;
 pub mod form_factor;
 pub mod geom;
+pub mod lights;
 pub mod mesh;
 pub mod output;
 pub mod pipeline;

@@ -92,9 +92,9 @@ pub struct Solved {
     pub refinement: Vec<mesh::adaptive::PassStats>,
     /// Warnings about the solution (e.g. light lost into back faces).
     pub warnings: Vec<String>,
-    /// Direct irradiance from the sky and its sun per element (empty without a sky; see
-    /// [`crate::sky`]).
-    pub sky_irradiance: Vec<Rgb>,
+    /// Direct irradiance per element from light that is not a surface's: the sky, its sun
+    /// and the point, spot and directional lights (empty without; see [`crate::lights`]).
+    pub external_irradiance: Vec<Rgb>,
 }
 
 /// Called after solver iterations with the scene and mesh being solved and the state
@@ -113,11 +113,12 @@ pub fn element_materials(scene: &Scene, mesh: &Mesh) -> (Vec<Rgb>, Vec<Rgb>) {
 }
 
 /// Per-element reflectance and the emitted exitance of the linear system: the surfaces' own
-/// (`π·Ke`) plus, under a sky, its first reflection `ρ_i · H_sky,i` (`sky` = the direct
-/// irradiance from the sky and its sun, [`crate::sky::element_irradiance`]; empty without).
-pub fn system_materials(scene: &Scene, mesh: &Mesh, sky: &[Rgb]) -> (Vec<Rgb>, Vec<Rgb>) {
+/// (`π·Ke`) plus the first reflection `ρ_i · H_ext,i` of light from outside the surfaces
+/// (`external` = the direct irradiance from the sky, its sun and the lights,
+/// [`crate::lights::element_irradiance`]; empty without).
+pub fn system_materials(scene: &Scene, mesh: &Mesh, external: &[Rgb]) -> (Vec<Rgb>, Vec<Rgb>) {
     let (rho, mut emission) = element_materials(scene, mesh);
-    for ((e, r), h) in emission.iter_mut().zip(&rho).zip(sky) {
+    for ((e, r), h) in emission.iter_mut().zip(&rho).zip(external) {
         *e += *r * *h;
     }
     (rho, emission)
@@ -149,8 +150,8 @@ struct Prepared {
     reflectance: Vec<Rgb>,
     emission: Vec<Rgb>,
     area: Vec<f64>,
-    /// Direct irradiance from the sky and its sun per element (empty without a sky).
-    sky_irradiance: Vec<Rgb>,
+    /// Direct irradiance from the sky, its sun and the lights per element (empty without).
+    external_irradiance: Vec<Rgb>,
     timings: Timings,
     refinement: Vec<mesh::adaptive::PassStats>,
     /// Rays cast by refinement so far (counted into the form-factor statistics).
@@ -222,7 +223,7 @@ fn prepare(
         reflectance: Vec::new(),
         emission: Vec::new(),
         area: Vec::new(),
-        sky_irradiance: Vec::new(),
+        external_irradiance: Vec::new(),
         timings,
         refinement,
         refine_rays,
@@ -322,7 +323,7 @@ impl Prepared {
                 return Err(Error::Cancelled);
             }
             let t_sky = Instant::now();
-            self.sky_irradiance = sky_irradiance(scene, mesh, rays, &receivers, progress)?;
+            self.external_irradiance = external_irradiance(scene, mesh, rays, &receivers, progress)?;
             let sky_seconds = t_sky.elapsed().as_secs_f64();
             self.timings.sky += sky_seconds;
             let (transport, mut ff_stats) = match self.kind {
@@ -331,7 +332,7 @@ impl Prepared {
                     (Operator::Rows(rows), stats)
                 }
                 transport::Kind::Hierarchical => {
-                    let (rho, em) = system_materials(scene, mesh, &self.sky_irradiance);
+                    let (rho, em) = system_materials(scene, mesh, &self.external_irradiance);
                     let mut tree = tree.take().expect("built above");
                     tree.refit(mesh, &receivers.open_areas(mesh));
                     let (h, rays_cast) = form_factor::hierarchical::link(
@@ -376,11 +377,11 @@ impl Prepared {
         } else {
             let receivers = Receivers::all_open(mesh);
             let t_sky = Instant::now();
-            self.sky_irradiance = sky_irradiance(scene, mesh, rays, &receivers, progress)?;
+            self.external_irradiance = external_irradiance(scene, mesh, rays, &receivers, progress)?;
             self.timings.sky += t_sky.elapsed().as_secs_f64();
             (receivers, None, None)
         };
-        let (reflectance, emission) = system_materials(scene, mesh, &self.sky_irradiance);
+        let (reflectance, emission) = system_materials(scene, mesh, &self.external_irradiance);
         // Covered parts of elements neither emit nor reflect: the power formulation and the
         // residual use the open areas.
         self.area = receivers.open_areas(mesh);
@@ -438,6 +439,15 @@ impl Prepared {
             progress.message(&format!("warning: {w}"));
             warnings.push(w);
         }
+        for l in self.scene.lights.iter().filter(|l| crate::lights::enclosed(&self.scene, &self.rays, l)) {
+            let at = l.loc.as_ref().map_or(String::new(), |loc| format!("{loc}: "));
+            let w = format!(
+                "{at}light '{}' is inside closed geometry (every ray from it meets the back of a surface): its light reaches no surface",
+                l.name
+            );
+            progress.message(&format!("warning: {w}"));
+            warnings.push(w);
+        }
         let t = Instant::now();
         let vertex_radiosity = reconstruct::vertex_radiosity(&self.scene, &self.mesh, &solution.display_radiosity());
         timings.reconstruct = t.elapsed().as_secs_f64();
@@ -453,18 +463,18 @@ impl Prepared {
             timings,
             refinement: self.refinement,
             warnings,
-            sky_irradiance: self.sky_irradiance,
+            external_irradiance: self.external_irradiance,
         }
     }
 }
 
-/// The direct irradiance from the sky and its sun of every element when the scene has a
-/// lit sky (empty otherwise).
-fn sky_irradiance(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, progress: &dyn Progress) -> Result<Vec<Rgb>> {
-    if scene.lit_sky().is_none() {
+/// The direct irradiance from the sky, its sun and the lights of every element when the
+/// scene has such light (empty otherwise).
+fn external_irradiance(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, progress: &dyn Progress) -> Result<Vec<Rgb>> {
+    if !scene.has_external_light() {
         return Ok(Vec::new());
     }
-    let (s, _) = crate::sky::element_irradiance(scene, mesh, rays, receivers, progress);
+    let (s, _) = crate::lights::element_irradiance(scene, mesh, rays, receivers, progress);
     if progress.should_stop() {
         return Err(Error::Cancelled);
     }
@@ -740,7 +750,7 @@ impl Solved {
     /// `(F·(B − E))_i`; without (stochastic solvers) it is `(B − E)/ρ` minus the direct
     /// irradiance sampled at the element's receiver point and the sky's and sun's.
     pub fn indirect_irradiance(&self) -> (Vec<Rgb>, Vec<Rgb>) {
-        let (rho, emission) = system_materials(&self.scene, &self.mesh, &self.sky_irradiance);
+        let (rho, emission) = system_materials(&self.scene, &self.mesh, &self.external_irradiance);
         let b = self.solution.display_radiosity();
         let h: Vec<Rgb> = match &self.transport {
             Some(f) => indirect_irradiance(&self.scene, &self.mesh, f, &self.solution),
@@ -816,16 +826,20 @@ impl Solved {
     /// [`solve::EnergyBalance`]).
     pub fn energy(&self) -> EnergyReport {
         let mut e = EnergyReport::from(&self.solution.energy);
-        if self.scene.lit_sky().is_some() {
+        if self.scene.has_external_light() {
             let incident: Rgb = self
                 .mesh
                 .elements
                 .iter()
                 .zip(&self.receivers.open_fraction)
-                .zip(&self.sky_irradiance)
+                .zip(&self.external_irradiance)
                 .map(|((el, f), h)| *h * (el.area * f))
                 .sum();
-            e.sky_incident = Some(incident.to_array());
+            e.external_incident = Some(incident.to_array());
+            let powers: Vec<Rgb> = self.scene.lights.iter().filter_map(crate::lights::emitted_power).collect();
+            if !powers.is_empty() {
+                e.lights_power = Some(powers.into_iter().sum::<Rgb>().to_array());
+            }
         }
         e
     }

@@ -40,7 +40,8 @@ pub struct Timings {
     pub bvh: f64,
     /// Form factors.
     pub form_factors: f64,
-    /// Sky exposure of the elements (scenes with a sky).
+    /// Direct light from the sky, its sun and the point, spot and directional lights per
+    /// element (scenes with such light).
     pub sky: f64,
     /// Solving.
     pub solve: f64,
@@ -68,11 +69,15 @@ pub struct EnergyReport {
     pub unshot: [f64; 3],
     /// max over channels of |emitted − absorbed − escaped − back_faces − unshot| / emitted.
     pub imbalance: f64,
-    /// Under a sky: the sky's and sun's power reaching the surfaces directly, Σ H_sky,i·A_i. Its first
-    /// reflection (ρ times it) is part of `emitted`: the system's sources are the surfaces'
-    /// own emission plus that reflection.
+    /// Under a sky or with point, spot or directional lights: their power reaching the
+    /// surfaces directly, Σ H_ext,i·A_i. Its first reflection (ρ times it) is part of
+    /// `emitted`: the system's sources are the surfaces' own emission plus that reflection.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub sky_incident: Option<[f64; 3]>,
+    pub external_incident: Option<[f64; 3]>,
+    /// With point or spot lights: the power they send out, Σ 4π I (spots: over their cone).
+    /// In a closed room all of it reaches the surfaces (`external_incident`, without a sky).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lights_power: Option<[f64; 3]>,
 }
 
 impl From<&EnergyBalance> for EnergyReport {
@@ -84,7 +89,8 @@ impl From<&EnergyBalance> for EnergyReport {
             back_faces: e.back_faces.to_array(),
             unshot: e.unshot.to_array(),
             imbalance: e.relative_imbalance(),
-            sky_incident: None,
+            external_incident: None,
+            lights_power: None,
         }
     }
 }

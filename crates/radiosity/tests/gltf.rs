@@ -457,18 +457,70 @@ fn position_accessor_must_be_float_vec3() {
 }
 
 #[test]
-fn punctual_lights_are_counted_and_a_scene_without_emitters_says_so() {
+fn punctual_lights_are_placed_by_their_nodes() {
+    use radiosity::scene::LightKind;
     let (mut j, bin) = doc(&TRI, None);
     j["extensionsUsed"] = json!(["KHR_lights_punctual"]);
-    j["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "point"}, {"type": "spot", "spot": {}}]}});
-    let p = write_embedded("punctual.gltf", j, &bin);
+    j["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+        {"type": "point", "name": "bulb", "color": [1.0, 0.5, 0.25], "intensity": 8.0, "range": 5.0},
+        {"type": "spot", "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.5}},
+        {"type": "directional", "intensity": 3.0},
+        {"type": "area"},
+        {"type": "point", "name": "unplaced"}
+    ]}});
+    j["scenes"][0]["nodes"] = json!([0, 1]);
+    // Rotation −90° about X turns −Z (where a light points) into −Y.
+    let s = std::f64::consts::FRAC_1_SQRT_2;
+    j["nodes"] = json!([
+        {"mesh": 0, "name": "thing"},
+        {"name": "rig", "translation": [1.0, 2.0, 3.0], "children": [2, 3, 4, 5]},
+        {"extensions": {"KHR_lights_punctual": {"light": 0}}},
+        {"rotation": [-s, 0.0, 0.0, s], "extensions": {"KHR_lights_punctual": {"light": 1}}},
+        {"scale": [2.0, 2.0, 2.0], "extensions": {"KHR_lights_punctual": {"light": 2}}},
+        {"extensions": {"KHR_lights_punctual": {"light": 3}}}
+    ]);
+    let p = write_embedded("punctual.gltf", j.clone(), &bin);
     let d = load(&p).unwrap();
+    assert_eq!(d.lights.len(), 3, "{:?}", d.lights);
+    assert_eq!(d.lights[0].name, "bulb");
+    assert_eq!(d.lights[0].kind, LightKind::Point { position: DVec3::new(1.0, 2.0, 3.0) });
+    assert_eq!(d.lights[0].intensity, Rgb::new(8.0, 4.0, 2.0));
+    let LightKind::Spot { position, direction, inner_cone, outer_cone } = d.lights[1].kind else { panic!("{:?}", d.lights[1]) };
+    assert_eq!(position, DVec3::new(1.0, 2.0, 3.0));
+    assert!((direction - DVec3::NEG_Y).length() < 1e-6, "{direction}");
+    assert!((inner_cone - 0.2).abs() < 1e-12 && (outer_cone - 0.5).abs() < 1e-12);
+    let LightKind::Directional { direction } = d.lights[2].kind else { panic!("{:?}", d.lights[2]) };
+    assert!((direction.normalize() - DVec3::NEG_Z).length() < 1e-12);
+    assert!(d.warnings.iter().any(|w| w.msg.contains("range is ignored")), "{:?}", d.warnings);
     assert_eq!(d.ignored_lights.len(), 1, "{:?}", d.ignored_lights);
-    assert!(d.warnings.iter().any(|w| w.msg.contains("2 KHR_lights_punctual lights are ignored")), "{:?}", d.warnings);
+    assert!(d.ignored_lights[0].contains("\"area\""), "{:?}", d.ignored_lights);
+    // A scene lit only by them is lit; validation normalises the directional light.
     let s = Scene::from_desc(d).unwrap();
+    s.check_emits().unwrap();
+    let LightKind::Directional { direction } = s.lights[2].kind else { unreachable!() };
+    assert!((direction - DVec3::NEG_Z).length() < 1e-12);
+
+    // Out of range, and a cone that glTF forbids (outer > π/2), are errors naming the file.
+    j["nodes"][2]["extensions"]["KHR_lights_punctual"]["light"] = json!(9);
+    let e = err_of(&write_embedded("punctual-range.gltf", j.clone(), &bin));
+    assert!(e.contains("KHR_lights_punctual light 9 is out of range (there are 5)"), "{e}");
+    j["nodes"][2]["extensions"]["KHR_lights_punctual"]["light"] = json!(1);
+    j["extensions"]["KHR_lights_punctual"]["lights"][1]["spot"]["outerConeAngle"] = json!(2.0);
+    let p = write_embedded("punctual-cone.gltf", j, &bin);
+    let e = Scene::from_desc(load(&p).unwrap()).unwrap_err().to_string();
+    assert!(e.starts_with(&p.display().to_string()) && e.contains("must satisfy 0 ≤ inner < outer ≤ 90°"), "{e}");
+}
+
+#[test]
+fn lights_of_no_kind_we_know_leave_the_scene_dark_and_say_so() {
+    let (mut j, bin) = doc(&TRI, None);
+    j["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "area"}]}});
+    j["nodes"][0]["extensions"] = json!({"KHR_lights_punctual": {"light": 0}});
+    let p = write_embedded("punctual-dark.gltf", j, &bin);
+    let s = Scene::from_desc(load(&p).unwrap()).unwrap();
     let e = s.check_emits().unwrap_err().to_string();
     assert!(e.starts_with(&format!("{}: no surface emits light", p.display())), "{e}");
-    assert!(e.contains("2 KHR_lights_punctual lights are ignored (not supported yet"), "{e}");
+    assert!(e.contains("light 'light 0' of type \"area\" is ignored"), "{e}");
 }
 
 #[test]

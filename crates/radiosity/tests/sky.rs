@@ -110,7 +110,7 @@ fn open_box_under_the_sky_matches_the_box_closed_by_a_black_emitting_lid() {
             .mesh
             .elements
             .iter()
-            .zip(&sky.sky_irradiance)
+            .zip(&sky.external_irradiance)
             .zip(&sky.receivers.open_fraction)
             .map(|((el, h), f)| {
                 let rho = sky.scene.materials[sky.scene.polygons[el.patch as usize].material as usize].reflectance.x;
@@ -139,7 +139,7 @@ fn no_sky_light_enters_a_closed_room() {
     let scene = Scene::from_desc(d).unwrap();
     scene.check_emits().expect("a sky is a light");
     let solved = solve_scene(scene, &Settings { mesh_size: Some(0.1), ..Default::default() }, &NoProgress).unwrap();
-    assert!(solved.sky_irradiance.iter().all(|&h| h == Rgb::ZERO), "sky light inside a closed room");
+    assert!(solved.external_irradiance.iter().all(|&h| h == Rgb::ZERO), "sky light inside a closed room");
     assert!(solved.solution.radiosity.iter().all(|b| *b == Rgb::ZERO));
 }
 
@@ -154,7 +154,7 @@ fn final_gather_shows_the_sky_and_a_plate_lit_by_it_exactly() {
     d.sky = Some(Sky { radiance: Rgb::splat(l_sky), sun: None });
     let scene = Scene::from_desc(d).unwrap();
     let solved = solve_scene(scene, &Settings { mesh_size: Some(0.1), ..Default::default() }, &NoProgress).unwrap();
-    assert!(solved.sky_irradiance.iter().all(|&h| h == Rgb::splat(PI * l_sky)));
+    assert!(solved.external_irradiance.iter().all(|&h| h == Rgb::splat(PI * l_sky)));
     // The plate fills the middle of the view; the corners see only sky.
     let cam = Camera { position: DVec3::new(0.5, 1.0, 0.5), look_at: DVec3::new(0.5, 0.0, 0.5), up: DVec3::Z, vfov_deg: 90.0 };
     let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
@@ -311,7 +311,7 @@ fn sun_lights_an_open_floor_by_the_cosine_law() {
     for b in solved.solution.display_radiosity() {
         assert!((b.x / PI - exact).abs() < 1e-3 * exact, "L {} against {exact}", b.x / PI);
     }
-    let incident = solved.energy().sky_incident.unwrap()[0];
+    let incident = solved.energy().external_incident.unwrap()[0];
     assert!((incident - 100.0 * t.cos() * 4.0).abs() < 1e-3 * incident, "sun power on the floor {incident}");
 }
 

@@ -122,6 +122,14 @@ impl SceneRays {
         })
     }
 
+    /// True if the segment from `a` (on polygon `from`) to the point `b` (a light, on no
+    /// polygon) meets no other polygon; a polygon through `b` itself does not block it.
+    #[inline]
+    pub fn reaches(&self, a: DVec3, from: u32, b: DVec3) -> bool {
+        let ray = Ray::new(a.as_vec3(), (b - a).as_vec3(), 0.0, 1.0 - SEGMENT_EPS);
+        !self.bvh.occluded_filtered(&ray, |prim| self.is_or_twin(self.tri_polygon[prim as usize], from))
+    }
+
     /// Closest polygon whose visible face is hit by a ray from `origin` (optionally leaving
     /// polygon `from`): the back face of one side of a two-sided pair is skipped, since its
     /// coincident twin faces the ray, and where the closest hit is the back face of a

@@ -36,7 +36,9 @@
 //! ray that leaves the scene reads `π L_sky` where one that meets an element reads its
 //! `B − E`), [`SKY_AXIS`]² rays of their own per position when interpolating. A sun adds
 //! `E_sun · max(0, n·ω) · V` per position with `shadow × shadow` rays in its disk (sharp
-//! shadows), and a camera ray that meets its disk shows its radiance.
+//! shadows), and a camera ray that meets its disk shows its radiance. Point, spot and
+//! directional lights ([`crate::lights`]) add their exact direct irradiance per position,
+//! one shadow ray each (hard shadows); they are not seen by the camera.
 //!
 //! Pixels average `spp × spp` stratified positions (box filter); shadow and gather rays are
 //! stratified over the whole pixel; each pixel draws its own random stream (seed, pixel),
@@ -204,6 +206,11 @@ pub fn render(
                             let pts = &sun_pattern[k * m2..(k + 1) * m2];
                             let (f, r) = crate::sky::sun_factor_at(rays, sun, p, el.normal, el.patch, pts);
                             hd += sun.irradiance * f;
+                            nrays += r;
+                        }
+                        if !scene.lights.is_empty() {
+                            let (hl, r) = crate::lights::lights_at(rays, &scene.lights, p, el.normal, el.patch);
+                            hd += hl;
                             nrays += r;
                         }
                         let dirs = &gather_pattern[k * g2..(k + 1) * g2];

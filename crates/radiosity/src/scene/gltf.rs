@@ -27,8 +27,15 @@
 //! (including `baseColorTexture` and `emissiveTexture`), normals and vertex colours are
 //! ignored: the solver needs one constant colour per material.
 //!
-//! **Not supported.** `KHR_lights_punctual` lights (counted in
-//! [`SceneDesc::ignored_lights`], with a warning), points and lines (skipped with a warning: they have no area), skins
+//! **Lights.** `KHR_lights_punctual` point, spot and directional lights become
+//! [`super::Light`]s at their nodes' world positions, pointing along the node's −Z (scale
+//! ignored, as the extension says), with intensity `color × intensity` taken in the
+//! scene's radiometric units (candela as radiant intensity, lux as irradiance; no
+//! 683 lm/W); spots keep `innerConeAngle`/`outerConeAngle` and glTF's falloff. `range` is
+//! ignored with a warning: light falls off as 1/r², as it physically does. A light of
+//! another type is ignored with a warning (counted in [`SceneDesc::ignored_lights`]).
+//!
+//! **Not supported.** Points and lines (skipped with a warning: they have no area), skins
 //! and morph targets (the rest pose is used, with a warning), orthographic cameras
 //! (ignored), URLs other than relative file paths and `data:` URIs, and required
 //! extensions that change geometry (Draco, meshopt, GPU instancing: an error).
@@ -378,7 +385,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             }
         }
 
-        let (instances, camera) = self.traverse()?;
+        let (instances, camera, light_nodes) = self.traverse()?;
 
         // Triangles of each mesh drawn, in the mesh's frame.
         let mut meshes: HashMap<usize, MeshTris> = HashMap::new();
@@ -457,29 +464,86 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             ));
         }
         desc.camera = camera;
-        let lights = self
+        self.lights(&light_nodes, &mut desc)?;
+        desc.warnings = std::mem::take(&mut self.warnings);
+        Ok(desc)
+    }
+
+    /// The KHR_lights_punctual lights placed by `nodes` (node, light index, world matrix).
+    fn lights(&mut self, nodes: &[(usize, usize, DMat4)], desc: &mut SceneDesc) -> Result<()> {
+        use super::{Light, LightKind};
+        let defs = self
             .raw
             .get("extensions")
             .and_then(|x| x.get("KHR_lights_punctual"))
             .and_then(|x| x.get("lights"))
             .and_then(|l| l.as_array())
-            .map_or(0, Vec::len);
-        if lights > 0 {
-            let msg = format!(
-                "{lights} KHR_lights_punctual light{} {} ignored (not supported yet: only emissive surfaces give light)",
-                if lights == 1 { "" } else { "s" },
-                if lights == 1 { "is" } else { "are" }
-            );
-            self.warn(Location::file(self.file), msg.clone());
-            desc.ignored_lights.push(format!("{}: {msg}", self.file.display()));
+            .cloned()
+            .unwrap_or_default();
+        let mut warned_range = false;
+        for &(ni, li, world) in nodes {
+            let loc = self.at("nodes", ni);
+            let Some(def) = defs.get(li) else {
+                return Err(self.err(
+                    "nodes",
+                    ni,
+                    format!("{}: KHR_lights_punctual light {li} is out of range (there are {})", self.node_label(ni), defs.len()),
+                ));
+            };
+            let file = self.file;
+            let num = |v: Option<&serde_json::Value>, default: f64, what: &str| -> Result<f64> {
+                match v {
+                    None => Ok(default),
+                    Some(x) => x.as_f64().ok_or_else(|| {
+                        Error::input(Location::file(file), format!("KHR_lights_punctual light {li}: {what} {x} is not a number"))
+                    }),
+                }
+            };
+            let name = def.get("name").and_then(|n| n.as_str()).map_or_else(|| format!("light {li}"), str::to_string);
+            let color = match def.get("color") {
+                None => [1.0; 3],
+                Some(c) => match c.as_array().map(|a| a.iter().filter_map(|x| x.as_f64()).collect::<Vec<f64>>()) {
+                    Some(v) if v.len() == 3 => [v[0], v[1], v[2]],
+                    _ => return Err(self.err("nodes", ni, format!("light '{name}': color {c} is not three numbers"))),
+                },
+            };
+            let intensity = Rgb::from_array(color) * num(def.get("intensity"), 1.0, "intensity")?;
+            if def.get("range").is_some() && !warned_range {
+                warned_range = true;
+                self.warn(loc.clone(), format!("light '{name}': range is ignored (light falls off as 1/r², physically)"));
+            }
+            let position = world.transform_point3(DVec3::ZERO);
+            let direction = world.transform_vector3(-DVec3::Z);
+            let kind = match def.get("type").and_then(|t| t.as_str()) {
+                Some("point") => LightKind::Point { position },
+                Some("directional") => LightKind::Directional { direction },
+                Some("spot") => {
+                    let spot = def.get("spot");
+                    LightKind::Spot {
+                        position,
+                        direction,
+                        inner_cone: num(spot.and_then(|s| s.get("innerConeAngle")), 0.0, "innerConeAngle")?,
+                        outer_cone: num(spot.and_then(|s| s.get("outerConeAngle")), std::f64::consts::FRAC_PI_4, "outerConeAngle")?,
+                    }
+                }
+                other => {
+                    let t = other.map_or_else(|| "none".to_string(), |t| format!("\"{t}\""));
+                    let msg = format!("light '{name}' of type {t} is ignored (KHR_lights_punctual has point, spot, directional)");
+                    self.warn(loc, msg.clone());
+                    desc.ignored_lights.push(format!("{}: {msg}", self.file.display()));
+                    continue;
+                }
+            };
+            desc.lights.push(Light { name, kind, intensity, loc: Some(loc) });
         }
-        desc.warnings = std::mem::take(&mut self.warnings);
-        Ok(desc)
+        Ok(())
     }
 
     /// Walks the scene's node hierarchy: nodes that draw a mesh with their world matrices,
-    /// and the first perspective camera.
-    fn traverse(&mut self) -> Result<(Vec<Instance>, Option<Camera>)> {
+    /// the first perspective camera, and the nodes that place a KHR_lights_punctual light
+    /// (node, light, world matrix).
+    #[allow(clippy::type_complexity)]
+    fn traverse(&mut self) -> Result<(Vec<Instance>, Option<Camera>, Vec<(usize, usize, DMat4)>)> {
         let root = self.root;
         let roots: Vec<usize> = if root.scenes.is_empty() {
             // No scene: every node that is nobody's child.
@@ -504,6 +568,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
         };
 
         let mut instances = Vec::new();
+        let mut lights = Vec::new();
         let mut camera: Option<Camera> = None;
         let mut visited: HashSet<usize> = HashSet::new();
         let mut warned_skin = false;
@@ -541,6 +606,15 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
                 }
                 instances.push(Instance { node: ni, mesh: mi, world });
             }
+            let light = self.raw.get("nodes").and_then(|n| n.get(ni)).and_then(|n| n.get("extensions")).and_then(|x| x.get("KHR_lights_punctual"));
+            if let Some(l) = light {
+                match l.get("light").and_then(|i| i.as_u64()) {
+                    Some(li) => lights.push((ni, li as usize, world)),
+                    None => {
+                        return Err(self.err("nodes", ni, format!("{}: KHR_lights_punctual has no light index", self.node_label(ni))))
+                    }
+                }
+            }
             if let (None, Some(c)) = (&camera, node.camera) {
                 camera = self.camera(ni, c.value(), world);
             }
@@ -548,7 +622,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
                 stack.push((c.value(), world, Some(ni)));
             }
         }
-        Ok((instances, camera))
+        Ok((instances, camera, lights))
     }
 
     /// A node's own transform: its matrix, or translation × rotation × scale.

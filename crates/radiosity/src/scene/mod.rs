@@ -236,6 +236,62 @@ impl Sky {
     }
 }
 
+/// A light that is not a surface (KHR_lights_punctual, TOML `[[lights]]`): a point, a spot
+/// or a directional light. Its direct light at a surface point is exact up to a shadow ray
+/// ([`crate::lights`]); its reflections go through the radiosity system like the sky's.
+///
+/// Units: the scene's radiometric units, like `Ke`. A point or spot light's `intensity` is
+/// radiant intensity I (per steradian; glTF's candela taken as is, without 683 lm/W), so a
+/// surface at distance r facing it receives I/r², and a small emitter of radiance `Ke` and
+/// area A, seen face on, has the same intensity as a point light of I = Ke·A. A directional
+/// light's `intensity` is the irradiance on a surface facing it (glTF's lux taken as is).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Light {
+    /// A name for messages ("light 2", the glTF light's name).
+    pub name: String,
+    /// What kind, and where.
+    pub kind: LightKind,
+    /// Radiant intensity (point, spot) or irradiance (directional), linear RGB.
+    pub intensity: Rgb,
+    /// Where it was defined.
+    pub loc: Option<Location>,
+}
+
+/// The kinds of [`Light`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    /// Light from a point, the same in every direction.
+    Point {
+        /// Position.
+        position: DVec3,
+    },
+    /// A point light limited to a cone: full inside `inner_cone` (radians from the axis),
+    /// none beyond `outer_cone`, between them glTF's smooth falloff
+    /// `clamp((cos θ − cos outer)/(cos inner − cos outer), 0, 1)²`.
+    Spot {
+        /// Position.
+        position: DVec3,
+        /// Unit vector of the cone's axis: where the light goes.
+        direction: DVec3,
+        /// Half-angle of full intensity, radians (glTF `innerConeAngle`, default 0).
+        inner_cone: f64,
+        /// Half-angle where it reaches zero, radians (glTF `outerConeAngle`, default π/4).
+        outer_cone: f64,
+    },
+    /// Parallel light from infinitely far, like a sun of no size.
+    Directional {
+        /// Unit vector of where the light goes (glTF: the node's −Z).
+        direction: DVec3,
+    },
+}
+
+impl Light {
+    /// True if it gives light.
+    pub fn is_lit(&self) -> bool {
+        self.intensity.max_element() > 0.0
+    }
+}
+
 /// A scene as read from a file, before validation.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SceneDesc {
@@ -259,11 +315,13 @@ pub struct SceneDesc {
     /// Refuse a reflectance channel ≥ 1 instead of lowering it to [`MAX_REFLECTANCE`].
     pub strict: bool,
     /// Light sources in the file that are not surfaces and were ignored, in words (e.g.
-    /// "2 KHR_lights_punctual lights are ignored (not supported yet)"), for the error of a
+    /// "light 'x' of type \"area\" is ignored"), for the error of a
     /// scene without light ([`Scene::check_emits`]).
     pub ignored_lights: Vec<String>,
     /// A uniform sky around the geometry (TOML `[sky]`, the CLI's `--sky`).
     pub sky: Option<Sky>,
+    /// Point, spot and directional lights (glTF KHR_lights_punctual, TOML `[[lights]]`).
+    pub lights: Vec<Light>,
 }
 
 /// A validated material.
@@ -350,6 +408,8 @@ pub struct Scene {
     pub lost_light: Vec<String>,
     /// The sky, if any (validated: finite, non-negative, not all zero).
     pub sky: Option<Sky>,
+    /// Point, spot and directional lights that give light (validated; dark ones dropped).
+    pub lights: Vec<Light>,
 }
 
 impl Scene {
@@ -396,9 +456,15 @@ impl Scene {
         self.sky.filter(Sky::is_lit)
     }
 
-    /// True if some polygon emits light or the sky gives light.
+    /// True if some polygon emits light, the sky gives light or there is a light.
     pub fn has_light(&self) -> bool {
-        self.has_emitter() || self.lit_sky().is_some()
+        self.has_emitter() || self.lit_sky().is_some() || !self.lights.is_empty()
+    }
+
+    /// True if light comes from outside the surfaces: a lit sky or a [`Light`]. Its
+    /// direct irradiance is computed per element by [`crate::lights::element_irradiance`].
+    pub fn has_external_light(&self) -> bool {
+        self.lit_sky().is_some() || !self.lights.is_empty()
     }
 
     /// An error when no surface emits light and there is no sky (a render or solve would be all black), saying
@@ -410,7 +476,8 @@ impl Scene {
         }
         let why = if self.lost_light.is_empty() {
             "no material has a positive emission (OBJ/MTL Ke, glTF emissiveFactor, TOML emission) and \
-             there is no sky (TOML [sky], --sky), so the image would be black"
+             there is no sky (TOML [sky], --sky) and no light (TOML [[lights]], glTF KHR_lights_punctual), \
+             so the image would be black"
                 .to_string()
         } else {
             self.lost_light.join("; ")

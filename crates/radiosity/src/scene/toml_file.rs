@@ -25,7 +25,29 @@
 //! direction = [0.3, 1, 0.2]    # towards the sun (normalised)
 //! irradiance = 1000            # on a surface facing it, unshadowed (exitance units)
 //! angular_diameter = 0.53      # degrees, 0 to 20 (default 0.53)
+//!
+//! [[lights]]                   # optional, any number: point, spot, directional, rect
+//! type = "spot"                # "point", "spot", "directional" or "rect"
+//! name = "desk lamp"           # optional (default "light N", N from 1 in file order)
+//! position = [0, 2.5, 0]       # point, spot
+//! direction = [0, -1, 0]       # spot, directional: where the light goes
+//! intensity = 40               # point, spot: radiant intensity I, so a surface at r facing
+//!                              # it gets I/r²; directional: irradiance on a surface facing
+//!                              # it (one value or [r, g, b]; the units of exitance)
+//! inner_cone = 20              # spot: degrees of full intensity (default 0)
+//! outer_cone = 30              # spot: degrees where it reaches zero (default 45, ≤ 90)
+//!
+//! [[lights]]                   # an area light: a rectangle that emits from its front,
+//! type = "rect"                # the side edge1 × edge2 points to (an emitting polygon of
+//! corner = [-0.5, 2.9, -0.5]   # its own material and object, seen by the camera)
+//! edge1 = [0, 0, 1]
+//! edge2 = [1, 0, 0]
+//! radiance = 10                # emitted radiance L_e (one value or [r, g, b])
 //! ```
+//!
+//! Point, spot and directional lights give exact direct light with hard shadows and are
+//! not seen by the camera ([`crate::lights`]); glTF files bring theirs (KHR_lights_punctual)
+//! with them.
 //!
 //! Material names that are not bare TOML keys are quoted: `[materials."wall 1"]`. An
 //! override applies to every material of that name in every mesh; naming a material that no
@@ -70,6 +92,25 @@ struct FileToml {
     #[serde(default)]
     materials: BTreeMap<String, Spanned<MaterialToml>>,
     sky: Option<Spanned<SkyToml>>,
+    #[serde(default)]
+    lights: Vec<Spanned<LightToml>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LightToml {
+    #[serde(rename = "type")]
+    kind: Spanned<String>,
+    name: Option<String>,
+    position: Option<Spanned<[f64; 3]>>,
+    direction: Option<Spanned<[f64; 3]>>,
+    intensity: Option<Spanned<Radiance>>,
+    inner_cone: Option<Spanned<f64>>,
+    outer_cone: Option<Spanned<f64>>,
+    corner: Option<Spanned<[f64; 3]>>,
+    edge1: Option<Spanned<[f64; 3]>>,
+    edge2: Option<Spanned<[f64; 3]>>,
+    radiance: Option<Spanned<Radiance>>,
 }
 
 #[derive(Deserialize)]
@@ -207,6 +248,7 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
         }));
         desc.warnings.extend(part.warnings);
         desc.ignored_lights.extend(part.ignored_lights);
+        desc.lights.extend(part.lights);
         desc.two_sided |= part.two_sided;
         if mesh_camera.is_none() {
             mesh_camera = part.camera;
@@ -342,10 +384,119 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
             ));
         }
     }
+    for (k, l) in spec.lights.iter().enumerate() {
+        add_light(&mut desc, k, l, &at)?;
+    }
     let unchecked: Vec<MaterialDesc> =
         desc.materials.iter().zip(&from_gltf).filter(|(_, g)| **g).map(|(m, _)| m.clone()).collect();
     gltf::check_base_colors(&unchecked, file)?;
     Ok(desc)
+}
+
+/// Adds the `k`-th `[[lights]]` table: a [`super::Light`], or for `type = "rect"` an
+/// emitting rectangle with a material and an object of its own.
+fn add_light(desc: &mut SceneDesc, k: usize, l: &Spanned<LightToml>, at: &dyn Fn(std::ops::Range<usize>) -> Location) -> Result<()> {
+    use super::{Light, LightKind, ObjectDesc, PolygonDesc};
+    let loc = at(l.span());
+    let t = l.get_ref();
+    let name = t.name.clone().unwrap_or_else(|| format!("light {}", k + 1));
+    let kind = t.kind.get_ref().as_str();
+    let err = |span: std::ops::Range<usize>, msg: String| Err(Error::input(at(span), format!("[[lights]] '{name}': {msg}")));
+    // Which keys each type reads; any other is an error (as for unknown keys).
+    let allowed: &[&str] = match kind {
+        "point" => &["position", "intensity"],
+        "spot" => &["position", "direction", "intensity", "inner_cone", "outer_cone"],
+        "directional" => &["direction", "intensity"],
+        "rect" => &["corner", "edge1", "edge2", "radiance"],
+        other => {
+            return err(t.kind.span(), format!("type \"{other}\" is not one of \"point\", \"spot\", \"directional\", \"rect\""))
+        }
+    };
+    let given: [(&str, Option<std::ops::Range<usize>>); 9] = [
+        ("position", t.position.as_ref().map(|v| v.span())),
+        ("direction", t.direction.as_ref().map(|v| v.span())),
+        ("intensity", t.intensity.as_ref().map(|v| v.span())),
+        ("inner_cone", t.inner_cone.as_ref().map(|v| v.span())),
+        ("outer_cone", t.outer_cone.as_ref().map(|v| v.span())),
+        ("corner", t.corner.as_ref().map(|v| v.span())),
+        ("edge1", t.edge1.as_ref().map(|v| v.span())),
+        ("edge2", t.edge2.as_ref().map(|v| v.span())),
+        ("radiance", t.radiance.as_ref().map(|v| v.span())),
+    ];
+    for (key, span) in &given {
+        if let (Some(span), false) = (span, allowed.contains(key)) {
+            return err(span.clone(), format!("`{key}` is not read by a {kind} light (it reads {})", allowed.join(", ")));
+        }
+    }
+    for key in allowed.iter().filter(|k| !["inner_cone", "outer_cone"].contains(k)) {
+        if given.iter().any(|(g, s)| g == key && s.is_none()) {
+            return err(l.span(), format!("a {kind} light needs `{key}`"));
+        }
+    }
+    let vec3 = |v: &Option<Spanned<[f64; 3]>>, what: &str| -> Result<DVec3> {
+        let v = v.as_ref().expect("checked above");
+        let d = DVec3::from_array(*v.get_ref());
+        if !d.is_finite() {
+            return Err(Error::input(at(v.span()), format!("[[lights]] '{name}': {what} {:?} must be finite", d.to_array())));
+        }
+        Ok(d)
+    };
+    let rgb = |r: &Option<Spanned<Radiance>>, what: &str| -> Result<Rgb> {
+        let r = r.as_ref().expect("checked above");
+        let v = match r.get_ref() {
+            Radiance::Grey(g) => [*g; 3],
+            Radiance::Rgb(c) => *c,
+        };
+        if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
+            return Err(Error::input(at(r.span()), format!("[[lights]] '{name}': {what} {v:?} must be finite and non-negative")));
+        }
+        Ok(Rgb::from_array(v))
+    };
+    let cone = |c: &Option<Spanned<f64>>, default: f64| -> Result<f64> {
+        match c {
+            None => Ok(default),
+            Some(c) if c.get_ref().is_finite() && (0.0..=90.0).contains(c.get_ref()) => Ok(c.get_ref().to_radians()),
+            Some(c) => Err(Error::input(at(c.span()), format!("[[lights]] '{name}': cone angle {} must be 0 to 90 degrees", c.get_ref()))),
+        }
+    };
+    let kind = match kind {
+        "point" => LightKind::Point { position: vec3(&t.position, "position")? },
+        "spot" => {
+            let (inner_cone, outer_cone) = (cone(&t.inner_cone, 0.0)?, cone(&t.outer_cone, 45.0)?);
+            if inner_cone >= outer_cone {
+                let deg = |c: &Option<Spanned<f64>>, d: f64| c.as_ref().map_or(d, |c| *c.get_ref());
+                return err(
+                    l.span(),
+                    format!("inner_cone {}° must be below outer_cone {}°", deg(&t.inner_cone, 0.0), deg(&t.outer_cone, 45.0)),
+                );
+            }
+            LightKind::Spot { position: vec3(&t.position, "position")?, direction: vec3(&t.direction, "direction")?, inner_cone, outer_cone }
+        }
+        "directional" => LightKind::Directional { direction: vec3(&t.direction, "direction")? },
+        _ => {
+            // An emitting rectangle.
+            let c = vec3(&t.corner, "corner")?;
+            let (e1, e2) = (vec3(&t.edge1, "edge1")?, vec3(&t.edge2, "edge2")?);
+            if e1.cross(e2).length() <= 1e-12 * e1.length() * e2.length() || e1.length() == 0.0 || e2.length() == 0.0 {
+                return err(l.span(), format!("edge1 {:?} and edge2 {:?} span no area", e1.to_array(), e2.to_array()));
+            }
+            let material = desc.materials.len() as u32;
+            desc.materials.push(MaterialDesc {
+                name: format!("light:{name}"),
+                reflectance: Rgb::ZERO,
+                emission: rgb(&t.radiance, "radiance")?,
+                two_sided: Some(false),
+                loc: Some(loc.clone()),
+            });
+            let object = desc.objects.len() as u32;
+            desc.objects.push(ObjectDesc { name: name.clone(), loc: Some(loc.clone()) });
+            desc.polygons.push(PolygonDesc { vertices: vec![c, c + e1, c + e1 + e2, c + e2], material, object, loc: Some(loc) });
+            return Ok(());
+        }
+    };
+    let intensity = rgb(&t.intensity, "intensity")?;
+    desc.lights.push(Light { name, kind, intensity, loc: Some(loc) });
+    Ok(())
 }
 
 fn apply(m: &mut MaterialDesc, reflectance: Option<Rgb>, emission: Option<Rgb>, two_sided: Option<bool>, loc: &Location) {
@@ -480,5 +631,42 @@ mod tests {
     fn location_counts_characters() {
         let l = location(Path::new("f"), "ab\néé x", 8);
         assert_eq!((l.line, l.column), (Some(2), Some(4)));
+    }
+
+    #[test]
+    fn lights_tables_give_lights_and_rectangles_and_name_what_is_wrong() {
+        use crate::scene::LightKind;
+        let base = "mesh = \"builtin:cornell\"\n";
+        let d = parse(&format!(
+            "{base}[[lights]]\ntype = \"point\"\nposition = [1, 2, 3]\nintensity = [1, 2, 3]\n\
+             [[lights]]\ntype = \"spot\"\nname = \"s\"\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\nintensity = 2\nouter_cone = 30\n\
+             [[lights]]\ntype = \"directional\"\ndirection = [0, -1, 0]\nintensity = 5\n\
+             [[lights]]\ntype = \"rect\"\ncorner = [0, 1, 0]\nedge1 = [1, 0, 0]\nedge2 = [0, 0, 1]\nradiance = 4\n"
+        ))
+        .unwrap();
+        assert_eq!(d.lights.len(), 3);
+        assert_eq!(d.lights[0].name, "light 1");
+        assert_eq!(d.lights[0].kind, LightKind::Point { position: DVec3::new(1.0, 2.0, 3.0) });
+        assert_eq!(d.lights[0].intensity, Rgb::new(1.0, 2.0, 3.0));
+        assert_eq!(d.lights[0].loc.as_ref().unwrap().line, Some(2));
+        let LightKind::Spot { inner_cone, outer_cone, .. } = d.lights[1].kind else { panic!() };
+        assert_eq!((inner_cone, outer_cone), (0.0, 30f64.to_radians()));
+        let rect = d.polygons.last().unwrap();
+        assert_eq!(d.objects[rect.object as usize].name, "light 4");
+        let m = &d.materials[rect.material as usize];
+        assert_eq!((m.name.as_str(), m.emission, m.reflectance, m.two_sided), ("light:light 4", Rgb::splat(4.0), Rgb::ZERO, Some(false)));
+        for (text, want) in [
+            ("[[lights]]\ntype = \"area\"\n", "3:8: [[lights]] 'light 1': type \"area\" is not one of"),
+            ("[[lights]]\ntype = \"point\"\nposition = [0, 1, 0]\n", "a point light needs `intensity`"),
+            ("[[lights]]\ntype = \"point\"\nposition = [0, 1, 0]\nintensity = 1\ndirection = [0, 1, 0]\n", "6:13: [[lights]] 'light 1': `direction` is not read by a point light"),
+            ("[[lights]]\ntype = \"point\"\nposition = [0, 1, 0]\nintensity = -1\n", "5:13: [[lights]] 'light 1': intensity [-1.0, -1.0, -1.0] must be finite and non-negative"),
+            ("[[lights]]\ntype = \"spot\"\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\nintensity = 1\nouter_cone = 95\n", "cone angle 95 must be 0 to 90 degrees"),
+            ("[[lights]]\ntype = \"spot\"\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\nintensity = 1\ninner_cone = 40\nouter_cone = 30\n", "inner_cone 40° must be below outer_cone 30°"),
+            ("[[lights]]\ntype = \"rect\"\ncorner = [0, 1, 0]\nedge1 = [1, 0, 0]\nedge2 = [2, 0, 0]\nradiance = 1\n", "span no area"),
+            ("[[lights]]\ntype = \"point\"\nposition = [0, 1, 0]\nintensity = 1\ncolour = 1\n", "unknown field `colour`"),
+        ] {
+            let e = parse(&format!("{base}{text}")).unwrap_err().to_string();
+            assert!(e.contains(want), "{text}: {e}");
+        }
     }
 }

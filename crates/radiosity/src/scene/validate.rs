@@ -27,6 +27,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
         strict,
         ignored_lights,
         sky,
+        lights,
     } = desc;
     // The scene's file: where its polygons came from (built-in scenes: the name).
     let file = polygons.iter().find_map(|p| p.loc.as_ref().map(|l| l.file.clone())).unwrap_or_else(|| name.clone().into());
@@ -105,6 +106,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             }
         }
     }
+    let lights = validate_lights(lights, &file)?;
     let sky = sky.map(|mut s| {
         if let Some(sun) = &mut s.sun {
             sun.direction = sun.direction.normalize();
@@ -300,7 +302,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     }
     obstructions.sort_unstable();
     obstructions.dedup();
-    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions, file, lost_light, sky })
+    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions, file, lost_light, sky, lights })
 }
 
 /// Polygons skipped for one reason: how many, and the first.
@@ -533,6 +535,59 @@ fn ear_clip(v: &[DVec3], n: DVec3) -> Option<Vec<Vec<DVec3>>> {
     Some(tris)
 }
 
+/// Checks the lights (finite, non-negative intensity, a finite position, a non-zero
+/// direction, cone angles 0 ≤ inner < outer ≤ 90°), normalises their directions and drops
+/// the dark ones.
+fn validate_lights(lights: Vec<super::Light>, file: &std::path::Path) -> Result<Vec<super::Light>> {
+    use super::LightKind;
+    let mut out = Vec::with_capacity(lights.len());
+    for mut l in lights {
+        let at = l.loc.clone().unwrap_or_else(|| Location::file(file));
+        let bad = |why: String| Err(Error::input(at.clone(), format!("{}: {why}", l.name)));
+        let i = l.intensity.to_array();
+        if i.iter().any(|c| !c.is_finite() || *c < 0.0 || *c > MAX_EMISSION) {
+            return bad(format!("intensity {i:?} must be finite, non-negative and at most {MAX_EMISSION:e}"));
+        }
+        let position_ok = |p: DVec3| p.is_finite() && p.abs().max_element() <= MAX_COORDINATE;
+        let unit = |d: DVec3| (d.is_finite() && d.length() > 1e-12).then(|| d.normalize());
+        match &mut l.kind {
+            LightKind::Point { position } => {
+                if !position_ok(*position) {
+                    return bad(format!("position {:?} must be finite and within ±{MAX_COORDINATE:e}", position.to_array()));
+                }
+            }
+            LightKind::Spot { position, direction, inner_cone, outer_cone } => {
+                if !position_ok(*position) {
+                    return bad(format!("position {:?} must be finite and within ±{MAX_COORDINATE:e}", position.to_array()));
+                }
+                let Some(d) = unit(*direction) else {
+                    return bad(format!("direction {:?} must be a finite, non-zero vector", direction.to_array()));
+                };
+                *direction = d;
+                let half_pi = std::f64::consts::FRAC_PI_2;
+                if !(inner_cone.is_finite() && outer_cone.is_finite() && 0.0 <= *inner_cone && inner_cone < outer_cone && *outer_cone <= half_pi)
+                {
+                    return bad(format!(
+                        "cone angles inner {:.6}° and outer {:.6}° must satisfy 0 ≤ inner < outer ≤ 90°",
+                        inner_cone.to_degrees(),
+                        outer_cone.to_degrees()
+                    ));
+                }
+            }
+            LightKind::Directional { direction } => {
+                let Some(d) = unit(*direction) else {
+                    return bad(format!("direction {:?} must be a finite, non-zero vector", direction.to_array()));
+                };
+                *direction = d;
+            }
+        }
+        if l.is_lit() {
+            out.push(l);
+        }
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -638,3 +693,4 @@ mod tests {
         assert_eq!(names, ["a#1", "b", "a#2"]);
     }
 }
+
