@@ -4,6 +4,7 @@
 //! One file per subcommand; each parses raw flags (clap) and validates them into the
 //! library's settings before any work starts.
 
+mod bake;
 mod bench;
 mod common;
 mod compare;
@@ -31,6 +32,9 @@ enum Command {
     Render(render::RenderArgs),
     /// Solve a scene and write the report (per-object radiance, convergence, timings).
     Solve(solve::SolveArgs),
+    /// Solve a scene and write it with its light baked in: glTF binary (.glb) with
+    /// per-vertex COLOR_0, for three.js, Blender, Godot, Unity.
+    Bake(bake::BakeArgs),
     /// Compare a rendered EXR with a reference EXR (relative RMSE, light-masked too).
     Compare(compare::CompareArgs),
     /// Compute a view-factor matrix (CSV, NumPy .npy, JSON or View3D text) with diagnostics.
@@ -46,6 +50,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(a) => render::run(a),
         Command::Solve(a) => solve::run(a),
+        Command::Bake(a) => bake::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Viewfactors(a) => viewfactors::run(a),
         Command::Bench(a) => bench::run(a),

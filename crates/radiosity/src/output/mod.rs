@@ -3,6 +3,7 @@
 //! - [`png`]: exposure (automatic: 0.8 / 97th percentile of luminance, as the reference
 //!   images' previews) times radiance, clipped, sRGB transfer function, 8-bit PNG.
 //! - [`exr`]: linear radiance as 32-bit float OpenEXR (and reading EXR for comparisons).
+//! - [`gltf`]: the solved mesh with its light baked into per-vertex `COLOR_0`, as GLB.
 //! - [`metrics`]: relative RMSE between images, with the light-masked variant defined in
 //!   `../shared/reference/README.md`.
 //!
@@ -10,6 +11,7 @@
 //! library has no file-system side effects.
 
 pub mod exr;
+pub mod gltf;
 pub mod matrix;
 pub mod metrics;
 pub mod png;

@@ -1,0 +1,388 @@
+//! Baked light as glTF 2.0 binary (`.glb`): the solved mesh with per-vertex `COLOR_0`.
+//!
+//! glTF defines `COLOR_0` as a linear multiplier of the base colour, and a material with
+//! `KHR_materials_unlit` is shown as base colour × `COLOR_0`, with no lighting of the
+//! viewer's own (three.js `MeshBasicMaterial`, Blender, Babylon, `<model-viewer>`). Vertex
+//! colours must lie in [0, 1] (the Khronos validator's `ACCESSOR_NON_CLAMPED` error), so
+//! they hold what a display shows: the radiance times the exposure, clipped,
+//!
+//! ```text
+//! base colour = 1,   COLOR_0 = clamp(k · B_v / π, 0, 1)
+//! ```
+//!
+//! with `B_v` the reconstructed radiosity of vertex `v` ([`crate::reconstruct`], the values
+//! Gouraud rendering interpolates) and `k` the exposure — the same values, before the sRGB
+//! encoding, as a PNG of `render` at that exposure. Keeping the base colour at the
+//! reflectance and `COLOR_0` at the irradiance (so that a texture could multiply it) would
+//! need colours above 1 wherever a surface is lit brighter than white; that split is the
+//! lightmaps' job. Each material keeps its reflectance and emitted radiance in its
+//! `extras` (`radiosity.reflectance`, `radiosity.emission`). A viewer that ignores
+//! `KHR_materials_unlit` lights the surfaces again with its own lights (the extension is
+//! used, not required). Emitters also get `emissiveFactor` = their radiance × `k`, clipped.
+//!
+//! Geometry: one node per scene object (its name), one mesh with one triangle primitive
+//! per material; quadrilateral elements are split into two triangles; vertices are the
+//! mesh's, which are shared inside a patch and separate across patches, so light stays
+//! continuous on a wall and sharp at its corners. Both sides of a two-sided surface are
+//! written (opposite windings, `doubleSided` false), each with its own light. Positions are
+//! in the scene's units, as read. The scene's camera becomes a glTF perspective camera.
+//! The asset's `extras` hold the exposure and the convention, so tools can undo it.
+
+use std::collections::BTreeMap;
+
+use glam::{DMat3, DQuat, DVec3};
+use gltf::json;
+use json::validation::{Checked::Valid, USize64};
+
+use crate::mesh::Mesh;
+use crate::scene::{Camera, Scene};
+use crate::{luminance, Error, Result, Rgb};
+
+/// What to write.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Radiance is multiplied by this before it is written (see the module docs).
+    pub exposure: f64,
+    /// The camera to include as a glTF camera node (None: none).
+    pub camera: Option<Camera>,
+    /// `asset.generator`.
+    pub generator: String,
+}
+
+/// The automatic exposure of a bake: 0.8 over the 97th percentile (by area) of the
+/// elements' radiance luminance, emitters left out unless every surface emits (as [`super::auto_exposure`] does for
+/// image pixels, so that a baked model and a rendered image of it look alike).
+pub fn auto_exposure(scene: &Scene, mesh: &Mesh, element_b: &[Rgb]) -> f64 {
+    let radiance = |with_emitters: bool| -> Vec<(f64, f64)> {
+        mesh.elements
+            .iter()
+            .zip(element_b)
+            .filter(|(e, _)| with_emitters || !scene.materials[scene.polygons[e.patch as usize].material as usize].is_emitter())
+            .map(|(e, b)| (luminance(*b) / std::f64::consts::PI, e.area))
+            .filter(|(l, _)| *l > 0.0 && l.is_finite())
+            .collect()
+    };
+    // Every surface emits (a furnace): then the emitters are what there is to see.
+    let mut v = radiance(false);
+    if v.is_empty() {
+        v = radiance(true);
+    }
+    if v.is_empty() {
+        return 1.0;
+    }
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = v.iter().map(|x| x.1).sum();
+    let mut acc = 0.0;
+    for (l, a) in &v {
+        acc += a;
+        if acc >= 0.97 * total {
+            return 0.8 / l;
+        }
+    }
+    0.8 / v.last().unwrap().0
+}
+
+/// Summary of what was written.
+#[derive(Clone, Debug, Default)]
+pub struct Stats {
+    /// Triangles written.
+    pub triangles: usize,
+    /// Vertices written.
+    pub vertices: usize,
+    /// Vertex colour channels clipped to 1.
+    pub clipped: usize,
+}
+
+struct Buffer {
+    bytes: Vec<u8>,
+    views: Vec<json::buffer::View>,
+    accessors: Vec<json::Accessor>,
+}
+
+impl Buffer {
+    fn push_f32x3(&mut self, data: &[[f32; 3]], target: json::buffer::Target, min_max: bool) -> json::Index<json::Accessor> {
+        let offset = self.bytes.len();
+        for v in data {
+            for x in v {
+                self.bytes.extend(x.to_le_bytes());
+            }
+        }
+        let (min, max) = if min_max {
+            let mut lo = [f32::INFINITY; 3];
+            let mut hi = [f32::NEG_INFINITY; 3];
+            for v in data {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(v[k]);
+                    hi[k] = hi[k].max(v[k]);
+                }
+            }
+            (Some(json::serialize::to_value(lo).unwrap()), Some(json::serialize::to_value(hi).unwrap()))
+        } else {
+            (None, None)
+        };
+        self.view_and_accessor(offset, data.len(), target, json::accessor::ComponentType::F32, json::accessor::Type::Vec3, min, max)
+    }
+
+    fn push_u32(&mut self, data: &[u32]) -> json::Index<json::Accessor> {
+        let offset = self.bytes.len();
+        for x in data {
+            self.bytes.extend(x.to_le_bytes());
+        }
+        self.view_and_accessor(
+            offset,
+            data.len(),
+            json::buffer::Target::ElementArrayBuffer,
+            json::accessor::ComponentType::U32,
+            json::accessor::Type::Scalar,
+            None,
+            None,
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn view_and_accessor(
+        &mut self,
+        offset: usize,
+        count: usize,
+        target: json::buffer::Target,
+        component: json::accessor::ComponentType,
+        type_: json::accessor::Type,
+        min: Option<json::Value>,
+        max: Option<json::Value>,
+    ) -> json::Index<json::Accessor> {
+        let view = json::Index::push(
+            &mut self.views,
+            json::buffer::View {
+                buffer: json::Index::new(0),
+                byte_length: USize64::from(self.bytes.len() - offset),
+                byte_offset: Some(USize64::from(offset)),
+                byte_stride: None,
+                name: None,
+                target: Some(Valid(target)),
+                extensions: None,
+                extras: Default::default(),
+            },
+        );
+        json::Index::push(
+            &mut self.accessors,
+            json::Accessor {
+                buffer_view: Some(view),
+                byte_offset: None,
+                count: USize64::from(count),
+                component_type: Valid(json::accessor::GenericComponentType(component)),
+                extensions: None,
+                extras: Default::default(),
+                type_: Valid(type_),
+                min,
+                max,
+                name: None,
+                normalized: false,
+                sparse: None,
+            },
+        )
+    }
+}
+
+/// One primitive's vertices and triangles, in the mesh's vertex numbering until written.
+#[derive(Default)]
+struct Part {
+    /// Mesh vertex → local index.
+    local: BTreeMap<u32, u32>,
+    vertices: Vec<u32>,
+    normals: Vec<DVec3>,
+    indices: Vec<u32>,
+}
+
+impl Part {
+    fn vertex(&mut self, v: u32, n: DVec3) -> u32 {
+        let next = self.vertices.len() as u32;
+        *self.local.entry(v).or_insert_with(|| {
+            self.vertices.push(v);
+            self.normals.push(n);
+            next
+        })
+    }
+}
+
+/// The glTF camera node's rotation for a camera (glTF cameras look along −Z, up +Y).
+fn camera_rotation(c: &Camera) -> DQuat {
+    let f = (c.look_at - c.position).normalize();
+    let r = f.cross(c.up).normalize();
+    let u = r.cross(f);
+    DQuat::from_mat3(&DMat3::from_cols(r, u, -f)).normalize()
+}
+
+/// The scene with its light baked into per-vertex `COLOR_0`, as GLB bytes. `vertex_b` is
+/// the radiosity per mesh vertex ([`crate::reconstruct::vertex_radiosity`] of the display
+/// radiosity).
+pub fn vertex_colors_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], opts: &Options) -> Result<(Vec<u8>, Stats)> {
+    if vertex_b.len() != mesh.positions.len() {
+        return Err(Error::Invalid(format!("{} vertex values for {} vertices", vertex_b.len(), mesh.positions.len())));
+    }
+    if !(opts.exposure.is_finite() && opts.exposure > 0.0) {
+        return Err(Error::Invalid(format!("exposure {} must be a positive number", opts.exposure)));
+    }
+    // Primitives by (object, material), in element order.
+    let mut parts: BTreeMap<(u32, u32), Part> = BTreeMap::new();
+    for e in &mesh.elements {
+        let p = &scene.polygons[e.patch as usize];
+        let part = parts.entry((p.object, p.material)).or_default();
+        let n = e.vertex_count();
+        let ids: Vec<u32> = (0..n).map(|k| part.vertex(e.vertices[k], e.normal)).collect();
+        part.indices.extend([ids[0], ids[1], ids[2]]);
+        if n == 4 {
+            part.indices.extend([ids[0], ids[2], ids[3]]);
+        }
+    }
+
+    let mut stats = Stats::default();
+    let mut root = json::Root {
+        asset: json::Asset {
+            copyright: None,
+            extensions: None,
+            extras: Default::default(),
+            generator: Some(opts.generator.clone()),
+            min_version: None,
+            version: "2.0".into(),
+        },
+        extensions_used: vec!["KHR_materials_unlit".into()],
+        ..Default::default()
+    };
+    let extras = serde_json::json!({ "radiosity": {
+        "exposure": opts.exposure,
+        "color_0": "radiance x exposure, clipped to 1 (base colour 1, KHR_materials_unlit)",
+        "units": "scene units as read"
+    }});
+    root.asset.extras = Some(serde_json::value::to_raw_value(&extras).map_err(|e| Error::Invalid(e.to_string()))?);
+
+    // Materials used, in scene order.
+    let mut mat_index: BTreeMap<u32, json::Index<json::Material>> = BTreeMap::new();
+    for &(_, m) in parts.keys() {
+        if mat_index.contains_key(&m) {
+            continue;
+        }
+        let mat = &scene.materials[m as usize];
+        let emissive = (mat.emission * opts.exposure).min(Rgb::ONE);
+        let extras = serde_json::json!({ "radiosity": {
+            "reflectance": mat.reflectance.to_array(), "emission": mat.emission.to_array()
+        }});
+        let idx = root.push(json::Material {
+            name: Some(mat.name.clone()),
+            pbr_metallic_roughness: json::material::PbrMetallicRoughness {
+                base_color_factor: json::material::PbrBaseColorFactor([1.0; 4]),
+                metallic_factor: json::material::StrengthFactor(0.0),
+                roughness_factor: json::material::StrengthFactor(1.0),
+                ..Default::default()
+            },
+            emissive_factor: json::material::EmissiveFactor([emissive.x as f32, emissive.y as f32, emissive.z as f32]),
+            double_sided: false,
+            extras: Some(serde_json::value::to_raw_value(&extras).map_err(|e| Error::Invalid(e.to_string()))?),
+            extensions: Some(json::extensions::material::Material {
+                unlit: Some(json::extensions::material::Unlit {}),
+                ..Default::default()
+            }),
+            ..Default::default()
+        });
+        mat_index.insert(m, idx);
+    }
+
+    let mut buf = Buffer { bytes: Vec::new(), views: Vec::new(), accessors: Vec::new() };
+    let mut meshes: BTreeMap<u32, Vec<json::mesh::Primitive>> = BTreeMap::new();
+    for ((object, m), part) in &parts {
+        let pos: Vec<[f32; 3]> = part.vertices.iter().map(|&v| mesh.positions[v as usize].as_vec3().to_array()).collect();
+        let nor: Vec<[f32; 3]> = part.normals.iter().map(|n| n.as_vec3().to_array()).collect();
+        let col: Vec<[f32; 3]> = part
+            .vertices
+            .iter()
+            .map(|&v| {
+                let l = vertex_b[v as usize].max(Rgb::ZERO) * (opts.exposure / std::f64::consts::PI);
+                stats.clipped += l.to_array().iter().filter(|x| **x > 1.0).count();
+                l.min(Rgb::ONE).as_vec3().to_array()
+            })
+            .collect();
+        let a_pos = buf.push_f32x3(&pos, json::buffer::Target::ArrayBuffer, true);
+        let a_nor = buf.push_f32x3(&nor, json::buffer::Target::ArrayBuffer, false);
+        let a_col = buf.push_f32x3(&col, json::buffer::Target::ArrayBuffer, false);
+        let a_idx = buf.push_u32(&part.indices);
+        stats.vertices += pos.len();
+        stats.triangles += part.indices.len() / 3;
+        let mut attributes = BTreeMap::new();
+        attributes.insert(Valid(json::mesh::Semantic::Positions), a_pos);
+        attributes.insert(Valid(json::mesh::Semantic::Normals), a_nor);
+        attributes.insert(Valid(json::mesh::Semantic::Colors(0)), a_col);
+        meshes.entry(*object).or_default().push(json::mesh::Primitive {
+            attributes,
+            extensions: None,
+            extras: Default::default(),
+            indices: Some(a_idx),
+            material: Some(mat_index[m]),
+            mode: Valid(json::mesh::Mode::Triangles),
+            targets: None,
+        });
+    }
+    let mut scene_nodes = Vec::new();
+    for (object, primitives) in meshes {
+        let name = scene.objects[object as usize].name.clone();
+        let mesh_idx = root.push(json::Mesh {
+            extensions: None,
+            extras: Default::default(),
+            name: Some(name.clone()),
+            primitives,
+            weights: None,
+        });
+        scene_nodes.push(root.push(json::Node { mesh: Some(mesh_idx), name: Some(name), ..Default::default() }));
+    }
+    if let Some(c) = &opts.camera {
+        let diag = scene.diagonal().max(f64::MIN_POSITIVE);
+        let cam = root.push(json::Camera {
+            name: Some("camera".into()),
+            orthographic: None,
+            perspective: Some(json::camera::Perspective {
+                aspect_ratio: None,
+                yfov: c.vfov_deg.to_radians() as f32,
+                zfar: Some((20.0 * diag + (c.position - scene_center(scene)).length()) as f32),
+                znear: (1e-3 * diag) as f32,
+                extensions: None,
+                extras: Default::default(),
+            }),
+            type_: Valid(json::camera::Type::Perspective),
+            extensions: None,
+            extras: Default::default(),
+        });
+        let q = camera_rotation(c);
+        scene_nodes.push(root.push(json::Node {
+            camera: Some(cam),
+            name: Some("camera".into()),
+            rotation: Some(json::scene::UnitQuaternion([q.x as f32, q.y as f32, q.z as f32, q.w as f32])),
+            translation: Some(c.position.as_vec3().to_array()),
+            ..Default::default()
+        }));
+    }
+    let s = root.push(json::Scene { extensions: None, extras: Default::default(), name: Some(scene.name.clone()), nodes: scene_nodes });
+    root.scene = Some(s);
+    while buf.bytes.len() % 4 != 0 {
+        buf.bytes.push(0);
+    }
+    root.buffers.push(json::Buffer {
+        byte_length: USize64::from(buf.bytes.len()),
+        name: None,
+        uri: None,
+        extensions: None,
+        extras: Default::default(),
+    });
+    root.buffer_views = buf.views;
+    root.accessors = buf.accessors;
+    let json_bytes = root.to_vec().map_err(|e| Error::Invalid(format!("glTF JSON: {e}")))?;
+    let glb = gltf::binary::Glb {
+        header: gltf::binary::Header { magic: *b"glTF", version: 2, length: 0 },
+        json: std::borrow::Cow::Owned(json_bytes),
+        bin: Some(std::borrow::Cow::Owned(buf.bytes)),
+    };
+    let bytes = glb.to_vec().map_err(|e| Error::Invalid(format!("GLB: {e}")))?;
+    Ok((bytes, stats))
+}
+
+fn scene_center(scene: &Scene) -> DVec3 {
+    let (lo, hi) = scene.bounds();
+    0.5 * (lo + hi)
+}

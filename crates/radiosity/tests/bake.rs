@@ -1,0 +1,118 @@
+//! `radiosity bake`'s GLB (`output::gltf`): what a viewer reads back must be the solution.
+//!
+//! - The furnace box baked: every vertex colour is k·B/π with B = E/(1 − ρ), the closed form.
+//! - The Cornell box baked and read back by our own glTF reader: the same triangles, area,
+//!   object names and camera; every vertex colour is the reconstructed radiance × exposure,
+//!   clipped to 1, and the clipped count is what the statistics say.
+
+use std::f64::consts::PI;
+
+use glam::DVec3;
+use radiosity::output::gltf::{auto_exposure, vertex_colors_glb, Options};
+use radiosity::pipeline::{solve_scene, Settings, Solved};
+use radiosity::scene::{builtin, gltf::parse_gltf, Scene};
+use radiosity::NoProgress;
+use serde_json::Value;
+
+/// The JSON and BIN chunks of a GLB.
+fn chunks(glb: &[u8]) -> (Value, Vec<u8>) {
+    assert_eq!(&glb[0..4], b"glTF");
+    assert_eq!(u32::from_le_bytes(glb[4..8].try_into().unwrap()), 2);
+    assert_eq!(u32::from_le_bytes(glb[8..12].try_into().unwrap()) as usize, glb.len());
+    let jl = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    assert_eq!(&glb[16..20], b"JSON");
+    let json: Value = serde_json::from_slice(&glb[20..20 + jl]).unwrap();
+    let b0 = 20 + jl;
+    let bl = u32::from_le_bytes(glb[b0..b0 + 4].try_into().unwrap()) as usize;
+    assert_eq!(&glb[b0 + 4..b0 + 8], b"BIN\0");
+    (json, glb[b0 + 8..b0 + 8 + bl].to_vec())
+}
+
+/// Every COLOR_0 value of every primitive (f32 VEC3).
+fn colors(json: &Value, bin: &[u8]) -> Vec<[f32; 3]> {
+    let mut out = Vec::new();
+    for m in json["meshes"].as_array().unwrap() {
+        for p in m["primitives"].as_array().unwrap() {
+            let a = &json["accessors"][p["attributes"]["COLOR_0"].as_u64().unwrap() as usize];
+            assert_eq!((a["componentType"].as_u64(), a["type"].as_str()), (Some(5126), Some("VEC3")));
+            let v = &json["bufferViews"][a["bufferView"].as_u64().unwrap() as usize];
+            let off = v["byteOffset"].as_u64().unwrap_or(0) as usize;
+            for k in 0..a["count"].as_u64().unwrap() as usize {
+                let f = |c: usize| f32::from_le_bytes(bin[off + 12 * k + 4 * c..off + 12 * k + 4 * c + 4].try_into().unwrap());
+                out.push([f(0), f(1), f(2)]);
+            }
+        }
+    }
+    out
+}
+
+fn bake(solved: &Solved, exposure: f64) -> (Vec<u8>, radiosity::output::gltf::Stats) {
+    let opts = Options { exposure, camera: solved.scene.camera.clone(), generator: "test".into() };
+    vertex_colors_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, &opts).unwrap()
+}
+
+#[test]
+fn baked_furnace_vertex_colours_are_e_over_one_minus_rho() {
+    let scene = Scene::from_desc(builtin::furnace(0.5, 1.0)).unwrap();
+    let s = Settings { mesh_size: Some(0.25), solver: radiosity::solve::Solver::Direct, ..Default::default() };
+    let solved = solve_scene(scene, &s, &NoProgress).unwrap();
+    // B = πL/(1 − ρ) = 2π: radiance 2; exposure 0.3 puts it at 0.6.
+    let (glb, stats) = bake(&solved, 0.3);
+    let (json, bin) = chunks(&glb);
+    let c = colors(&json, &bin);
+    assert_eq!(c.len(), stats.vertices);
+    assert!(c.len() >= 6 * 25, "{} vertices", c.len());
+    for v in &c {
+        for x in v {
+            assert!((f64::from(*x) - 0.6).abs() < 1e-6, "vertex colour {x} against 0.6");
+        }
+    }
+    assert_eq!(stats.clipped, 0);
+    // The automatic exposure puts the furnace's one radiance at 0.8.
+    let k = auto_exposure(&solved.scene, &solved.mesh, &solved.solution.display_radiosity());
+    assert!((k * 2.0 - 0.8).abs() < 1e-7, "auto exposure {k}");
+    let m = &json["materials"][0];
+    assert_eq!(m["extensions"]["KHR_materials_unlit"], serde_json::json!({}));
+    assert_eq!(m["extras"]["radiosity"]["reflectance"], serde_json::json!([0.5, 0.5, 0.5]));
+    assert_eq!(json["asset"]["extras"]["radiosity"]["exposure"], serde_json::json!(0.3));
+}
+
+#[test]
+fn baked_cornell_box_reads_back_as_the_same_scene_and_light() {
+    let scene = Scene::from_desc(builtin::by_name("cornell").unwrap()).unwrap();
+    let solved = solve_scene(scene, &Settings::default(), &NoProgress).unwrap();
+    let k = auto_exposure(&solved.scene, &solved.mesh, &solved.solution.display_radiosity());
+    let (glb, stats) = bake(&solved, k);
+    // Our own reader: same triangles, area and object names.
+    let back = parse_gltf(&glb, std::path::Path::new("baked.glb"), |_: &str| -> std::io::Result<Vec<u8>> { unreachable!() }).unwrap();
+    assert_eq!(back.polygons.len(), stats.triangles);
+    let area = |v: &[DVec3]| 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length();
+    let a_back: f64 = back.polygons.iter().map(|p| area(&p.vertices)).sum();
+    let a_scene = solved.scene.total_area();
+    assert!((a_back - a_scene).abs() < 1e-5 * a_scene, "area {a_back} against {a_scene}");
+    let mut names: Vec<&str> = back.objects.iter().map(|o| o.name.as_str()).collect();
+    let mut want: Vec<&str> = solved.scene.objects.iter().map(|o| o.name.as_str()).collect();
+    names.sort_unstable();
+    want.sort_unstable();
+    assert_eq!(names, want);
+    // The camera: position, view direction, up and field of view.
+    let (c, w) = (back.camera.unwrap(), solved.scene.camera.clone().unwrap());
+    assert!((c.position - w.position).length() < 1e-3, "{c:?} against {w:?}");
+    let dir = |c: &radiosity::scene::Camera| (c.look_at - c.position).normalize();
+    assert!((dir(&c) - dir(&w)).length() < 1e-6 && (c.up.normalize() - w.up.normalize()).length() < 1e-6);
+    assert!((c.vfov_deg - w.vfov_deg).abs() < 1e-4);
+    // Colours: the vertex radiance × k, clipped, in the order written.
+    let (json, bin) = chunks(&glb);
+    let c = colors(&json, &bin);
+    let mut expect: Vec<f32> = solved.vertex_radiosity.iter().flat_map(|b| (*b * (k / PI)).to_array()).map(|x| x.min(1.0) as f32).collect();
+    let mut got: Vec<f32> = c.iter().flatten().copied().collect();
+    expect.sort_by(f32::total_cmp);
+    got.sort_by(f32::total_cmp);
+    // Every mesh vertex is used by some element, so the multisets agree.
+    assert_eq!(got.len(), expect.len());
+    assert!(got.iter().zip(&expect).all(|(a, b)| (a - b).abs() <= 1e-6 * b.max(1e-3)));
+    let clipped = solved.vertex_radiosity.iter().flat_map(|b| (*b * (k / PI)).to_array()).filter(|x| *x > 1.0).count();
+    assert_eq!(stats.clipped, clipped);
+    // The automatic exposure clips little but the light and its neighbourhood.
+    assert!(clipped < got.len() / 20, "{clipped} of {} clipped", got.len());
+}
