@@ -1,7 +1,14 @@
 #!/usr/bin/env bash
-# Bakes scenes with `radiosity bake` and checks each GLB with the Khronos glTF validator
-# (npm `gltf-validator`, installed here). Fails on any validator error or warning; skips
-# with a message when npm or the registry is not available.
+# Bakes scenes with `radiosity bake` and checks each GLB in real consumers:
+#  1. the Khronos glTF validator (npm `gltf-validator`): no error, no warning;
+#  2. three.js (npm `three`) in headless Chromium (Debian's `chromium`, driven by npm
+#     `playwright-core`): the Cornell box drawn from its glTF camera must match our own
+#     render of that view at the same exposure, relative RMSE light masked <= 8 % (vertex
+#     colours), against both the Gouraud and the final-gather render;
+#  3. Blender (Debian's `blender`, headless): imports the GLB with every mesh, its colour
+#     attribute and the camera.
+# npm packages are installed here; chromium by apt when missing and run as root. Each part
+# skips with a message when its tools cannot be had.
 #   checks/gltf/run.sh
 set -uo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
@@ -23,5 +30,46 @@ trap 'rm -rf "$out"' EXIT
 "$bin" bake furnace --two-sided --quiet -o "$out/furnace-two-sided.glb" || exit 1
 node "$here/validate.mjs" "$out"/*.glb
 status=$?
-if [ $status -eq 0 ]; then echo "gltf check: passed"; else echo "gltf check: FAILED"; fi
+if [ $status -eq 0 ]; then echo "gltf check: validator passed"; else echo "gltf check: validator FAILED"; fi
+
+# Blender, headless.
+blender=$(command -v blender || true)
+if [ -z "$blender" ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends blender python3-numpy) >/dev/null 2>&1
+  blender=$(command -v blender || true)
+fi
+if [ -z "$blender" ]; then
+  echo "gltf check: Blender SKIPPED (no blender, and apt could not install it)"
+elif line=$("$blender" -b --factory-startup --python "$here/blender_import.py" -- "$out/cornell.glb" 19 2>&1 | grep -E "^blender [0-9]"); then
+  echo "$line"
+  echo "gltf check: Blender import passed"
+else
+  echo "${line:-blender: the import script printed nothing}"
+  echo "gltf check: Blender import FAILED"
+  status=1
+fi
+
+# three.js in headless Chromium.
+chromium=${CHROMIUM:-$(command -v chromium || command -v chromium-browser || true)}
+if [ -z "$chromium" ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) >/dev/null 2>&1
+  chromium=$(command -v chromium || true)
+fi
+if [ -z "$chromium" ]; then
+  echo "gltf check: three.js SKIPPED (no chromium, and apt could not install it)"
+  exit $status
+fi
+k=3
+"$bin" bake --quiet --exposure $k -o "$out/cornell-k.glb" || exit 1
+"$bin" render --quiet --render gouraud --spp 8 --width 256 --height 256 --exposure $k -o "$out/ours-gouraud.png" || exit 1
+"$bin" render --quiet --width 256 --height 256 --exposure $k -o "$out/ours-gather.png" || exit 1
+shots=${SHOTS:-$out}
+for ours in gouraud gather; do
+  if CHROMIUM="$chromium" node "$here/three.mjs" "$out/cornell-k.glb" "$out/ours-$ours.png" "$shots/three-cornell-vs-$ours.png" 0.08; then
+    echo "gltf check: three.js against our $ours render passed"
+  else
+    echo "gltf check: three.js against our $ours render FAILED"
+    status=1
+  fi
+done
 exit $status

@@ -334,14 +334,19 @@ pub fn vertex_colors_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], opts: &Op
     }
     if let Some(c) = &opts.camera {
         let diag = scene.diagonal().max(f64::MIN_POSITIVE);
+        // The near plane as far out as the scene allows: depth precision falls with
+        // far/near, and a lamp 0.1 mm below the Cornell box's ceiling z-fights at near = 1 mm.
+        let (lo, hi) = scene.bounds();
+        let outside = (lo - c.position).max(c.position - hi).max(DVec3::ZERO).length();
+        let znear = (1e-3 * diag).max(0.9 * outside);
         let cam = root.push(json::Camera {
             name: Some("camera".into()),
             orthographic: None,
             perspective: Some(json::camera::Perspective {
                 aspect_ratio: None,
                 yfov: c.vfov_deg.to_radians() as f32,
-                zfar: Some((20.0 * diag + (c.position - scene_center(scene)).length()) as f32),
-                znear: (1e-3 * diag) as f32,
+                zfar: Some((2.0 * diag + (c.position - scene_center(scene)).length()) as f32),
+                znear: znear as f32,
                 extensions: None,
                 extras: Default::default(),
             }),
