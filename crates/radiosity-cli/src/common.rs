@@ -107,6 +107,14 @@ pub struct SolveFlags {
     /// [sky.sun] stays); 0 removes it.
     #[arg(long, value_name = "L", value_parser = parse_sky)]
     pub sky: Option<[f64; 3]>,
+    /// A sun: the direction towards it and its irradiance on a surface facing it,
+    /// X,Y,Z,E (E one value; replaces the scene file's [sky.sun], keeps its sky radiance;
+    /// E = 0 removes it). Its disk is --sun-diameter wide.
+    #[arg(long, value_name = "X,Y,Z,E", value_parser = parse_sun)]
+    pub sun: Option<[f64; 4]>,
+    /// Angular diameter of --sun's disk, degrees (0 to 20; 0 is a point).
+    #[arg(long, value_name = "DEG", default_value_t = radiosity::scene::toml_file::DEFAULT_SUN_DIAMETER_DEG)]
+    pub sun_diameter: f64,
     #[command(flatten)]
     pub adaptive: AdaptiveFlags,
     /// Seed for every random choice (results do not depend on --threads).
@@ -216,6 +224,18 @@ impl SolveFlags {
             let radiance = radiosity::Rgb::from_array(l);
             desc.sky = (radiance.max_element() > 0.0 || sun.is_some()).then_some(scene::Sky { radiance, sun });
         }
+        if let Some([x, y, z, e]) = self.sun {
+            if !(0.0..=scene::MAX_SUN_DIAMETER_DEG).contains(&self.sun_diameter) {
+                anyhow::bail!("--sun-diameter {} must be between 0 and {} degrees", self.sun_diameter, scene::MAX_SUN_DIAMETER_DEG);
+            }
+            let radiance = desc.sky.map_or(radiosity::Rgb::ZERO, |s| s.radiance);
+            let sun = (e > 0.0).then(|| scene::Sun {
+                direction: glam::DVec3::new(x, y, z),
+                irradiance: radiosity::Rgb::splat(e),
+                angular_diameter_deg: self.sun_diameter,
+            });
+            desc.sky = (radiance.max_element() > 0.0 || sun.is_some()).then_some(scene::Sky { radiance, sun });
+        }
         let scene = Scene::from_desc(desc)?;
         for w in &scene.warnings {
             eprintln!("warning: {w}");
@@ -241,6 +261,25 @@ fn parse_sky(s: &str) -> std::result::Result<[f64; 3], String> {
         return Err(format!("sky radiance {v:?} must be finite and non-negative"));
     }
     Ok(v)
+}
+
+/// `--sun X,Y,Z,E`: a finite, non-zero direction and a finite, non-negative irradiance.
+fn parse_sun(s: &str) -> std::result::Result<[f64; 4], String> {
+    let vals: Vec<f64> = s
+        .split(',')
+        .map(str::trim)
+        .map(|p| p.parse::<f64>().map_err(|_| format!("'{p}' is not a number")))
+        .collect::<std::result::Result<_, _>>()?;
+    let [x, y, z, e] = vals.as_slice() else {
+        return Err(format!("expected X,Y,Z,E (direction towards the sun, irradiance), got {} numbers", vals.len()));
+    };
+    if ![x, y, z].iter().all(|c| c.is_finite()) || (x * x + y * y + z * z) == 0.0 {
+        return Err(format!("sun direction [{x}, {y}, {z}] must be a finite, non-zero vector"));
+    }
+    if !(e.is_finite() && *e >= 0.0) {
+        return Err(format!("sun irradiance {e} must be finite and non-negative"));
+    }
+    Ok([*x, *y, *z, *e])
 }
 
 /// The largest `--time-budget`, in seconds (about 31 years): far beyond any run, far below

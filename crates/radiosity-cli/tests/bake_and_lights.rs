@@ -1,0 +1,82 @@
+//! `radiosity bake` and the light flags from the command line: the numbers a user reads.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn dir() -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli-bake-lights");
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn run(args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_radiosity")).args(args).output().unwrap();
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// A 4 × 4 grey floor (ρ = 0.5) facing up, and nothing else.
+fn floor() -> PathBuf {
+    let d = dir();
+    std::fs::write(d.join("floor.mtl"), "newmtl grey\nKd 0.5 0.5 0.5\n").unwrap();
+    let p = d.join("floor.obj");
+    std::fs::write(&p, "mtllib floor.mtl\nusemtl grey\no floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\n").unwrap();
+    p
+}
+
+fn floor_radiance(report: &Path) -> f64 {
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
+    r["objects"][0]["radiance_rgb"][0].as_f64().unwrap()
+}
+
+#[test]
+fn sun_flag_lights_a_floor_by_its_cosine() {
+    let f = floor();
+    let report = dir().join("sun.json");
+    // Towards the sun at 60° from the zenith: E cos 60° = 50 on the floor, L = ρ E cos/π.
+    let t = 60f64.to_radians();
+    let sun = format!("{},{},0,100", t.sin(), t.cos());
+    let (code, err) =
+        run(&["solve", f.to_str().unwrap(), "--sun", &sun, "--sun-diameter", "0", "-q", "--report", report.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{err}");
+    let l = floor_radiance(&report);
+    let exact = 0.5 * 100.0 * t.cos() / std::f64::consts::PI;
+    assert!((l - exact).abs() < 1e-9 * exact, "floor radiance {l} against {exact}");
+    // Bad values are refused before any work.
+    for (args, says) in [
+        (vec!["--sun", "0,0,0,1"], "must be a finite, non-zero vector"),
+        (vec!["--sun", "0,1,0"], "expected X,Y,Z,E"),
+        (vec!["--sun", "0,1,0,-5"], "must be finite and non-negative"),
+        (vec!["--sun", "0,1,0,5", "--sun-diameter", "45"], "--sun-diameter 45 must be between 0 and 20 degrees"),
+    ] {
+        let mut a = vec!["solve", f.to_str().unwrap(), "-q"];
+        a.extend(args);
+        let (code, err) = run(&a);
+        assert!(code == Some(1) || code == Some(2), "{a:?}: exit {code:?}");
+        assert!(err.contains(says), "{a:?}: {err}");
+    }
+}
+
+#[test]
+fn bake_writes_a_glb_and_refuses_what_it_cannot_write() {
+    let d = dir();
+    let glb = d.join("cornell.glb");
+    let (code, err) = run(&["bake", "-o", glb.to_str().unwrap(), "--mesh-size", "100", "--exposure", "2"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("at exposure 2.0000e0"), "{err}");
+    let bytes = std::fs::read(&glb).unwrap();
+    assert_eq!(&bytes[..4], b"glTF");
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize, bytes.len());
+    for (args, says) in [
+        (vec!["bake", "-o", "x.png"], "name the file .glb"),
+        (vec!["bake", "-o", "x.glb", "--exposure=0"], "--exposure must be a positive number"),
+    ] {
+        let (code, err) = run(&args);
+        assert_eq!(code, Some(1), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    // An output under a file (not a folder) is refused before any work.
+    let under = floor().join("x.glb");
+    let (code, err) = run(&["bake", "-o", under.to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("is not a folder") && !err.contains("iteration"), "{err}");
+}
