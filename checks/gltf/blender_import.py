@@ -32,7 +32,9 @@ for o in meshes:
 if not cameras:
     problems.append("no camera")
 verts = sum(len(o.data.vertices) for o in meshes)
+uvs = min((len(o.data.uv_layers) for o in meshes), default=0)
 print(f"blender {bpy.app.version_string}: {len(meshes)} meshes, {verts} vertices, {len(cameras)} camera(s), "
+      f"at least {uvs} UV map(s) on each, "
       f"colour attributes on {sum(1 for o in meshes if len(getattr(o.data, 'color_attributes', None) or o.data.vertex_colors))}: "
       + ("ok" if not problems else "; ".join(problems[:10])))
 sys.stdout.flush()

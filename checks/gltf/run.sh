@@ -3,10 +3,12 @@
 #  1. the Khronos glTF validator (npm `gltf-validator`): no error, no warning;
 #  2. three.js (npm `three`) in headless Chromium (Debian's `chromium`, driven by npm
 #     `playwright-core`): the Cornell box drawn from its glTF camera must match our own
-#     render of that view at the same exposure, relative RMSE light masked <= 8 % (vertex
-#     colours), against both the Gouraud and the final-gather render;
-#  3. Blender (Debian's `blender`, headless): imports the GLB with every mesh, its colour
-#     attribute and the camera.
+#     render of that view at the same exposure, relative RMSE light masked <= 8 % with
+#     vertex colours (against the Gouraud and the final-gather render), <= 5 % with the
+#     lightmap (against the final gather); the furnace's lightmap must show its one
+#     radiance in every pixel (a seam or an unfilled texel would not);
+#  3. Blender (Debian's `blender`, headless): imports the GLBs with every mesh, its colour
+#     attribute, both UV sets (lightmap) and the camera.
 # npm packages are installed here; chromium by apt when missing and run as root. Each part
 # skips with a message when its tools cannot be had.
 #   checks/gltf/run.sh
@@ -28,6 +30,10 @@ trap 'rm -rf "$out"' EXIT
 "$bin" bake --quiet -o "$out/cornell.glb" || exit 1
 "$bin" bake "$root/scenes/cornell-lamps.toml" --quiet -o "$out/cornell-lamps.glb" || exit 1
 "$bin" bake furnace --two-sided --quiet -o "$out/furnace-two-sided.glb" || exit 1
+k=3
+"$bin" bake --quiet --exposure $k -o "$out/cornell-k.glb" || exit 1
+"$bin" bake --quiet --exposure $k --lightmap -o "$out/cornell-lightmap.glb" || exit 1
+"$bin" bake furnace --quiet --exposure 0.4 --lightmap --lightmap-size 256 -o "$out/furnace-lightmap.glb" || exit 1
 node "$here/validate.mjs" "$out"/*.glb
 status=$?
 if [ $status -eq 0 ]; then echo "gltf check: validator passed"; else echo "gltf check: validator FAILED"; fi
@@ -40,13 +46,18 @@ if [ -z "$blender" ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; the
 fi
 if [ -z "$blender" ]; then
   echo "gltf check: Blender SKIPPED (no blender, and apt could not install it)"
-elif line=$("$blender" -b --factory-startup --python "$here/blender_import.py" -- "$out/cornell.glb" 19 2>&1 | grep -E "^blender [0-9]"); then
-  echo "$line"
-  echo "gltf check: Blender import passed"
 else
-  echo "${line:-blender: the import script printed nothing}"
-  echo "gltf check: Blender import FAILED"
-  status=1
+  for case in "cornell.glb 19 0" "cornell-lightmap.glb 19 2"; do
+    set -- $case
+    if line=$("$blender" -b --factory-startup --python "$here/blender_import.py" -- "$out/$1" "$2" "$3" 2>&1 | grep -E "^blender [0-9]"); then
+      echo "$1: $line"
+      echo "gltf check: Blender import of $1 passed"
+    else
+      echo "$1: ${line:-blender: the import script printed nothing}"
+      echo "gltf check: Blender import of $1 FAILED"
+      status=1
+    fi
+  done
 fi
 
 # three.js in headless Chromium.
@@ -59,16 +70,18 @@ if [ -z "$chromium" ]; then
   echo "gltf check: three.js SKIPPED (no chromium, and apt could not install it)"
   exit $status
 fi
-k=3
-"$bin" bake --quiet --exposure $k -o "$out/cornell-k.glb" || exit 1
 "$bin" render --quiet --render gouraud --spp 8 --width 256 --height 256 --exposure $k -o "$out/ours-gouraud.png" || exit 1
 "$bin" render --quiet --width 256 --height 256 --exposure $k -o "$out/ours-gather.png" || exit 1
+"$bin" render furnace --quiet --width 128 --height 128 --exposure 0.4 -o "$out/ours-furnace.png" || exit 1
 shots=${SHOTS:-$out}
-for ours in gouraud gather; do
-  if CHROMIUM="$chromium" node "$here/three.mjs" "$out/cornell-k.glb" "$out/ours-$ours.png" "$shots/three-cornell-vs-$ours.png" 0.08; then
-    echo "gltf check: three.js against our $ours render passed"
+# glb, our render, limit, mode, what
+for case in "cornell-k gouraud 0.08 colors" "cornell-k gather 0.08 colors" "cornell-lightmap gather 0.05 lightmap" \
+            "furnace-lightmap furnace 0.05 uniform:0.8"; do
+  set -- $case
+  if CHROMIUM="$chromium" node "$here/three.mjs" "$out/$1.glb" "$out/ours-$2.png" "$shots/three-$1-vs-$2.png" "$3" "$4"; then
+    echo "gltf check: three.js $1 against our $2 render passed"
   else
-    echo "gltf check: three.js against our $ours render FAILED"
+    echo "gltf check: three.js $1 against our $2 render FAILED"
     status=1
   fi
 done

@@ -3,8 +3,13 @@
 // view (a PNG at the same exposure) in linear light. three.js draws SS × SS times larger
 // without antialiasing and the pixels are averaged in linear light (a box filter, as our
 // renderer's samples per pixel).
-//   node three.mjs SCENE.glb OURS.png OUT.png [MAX_RMSE]
-// Prints the relative RMSE; exits 1 above MAX_RMSE (default 0.08) or on any error.
+//   node three.mjs SCENE.glb OURS.png OUT.png [MAX_RMSE] [colors|lightmap|uniform:L]
+// Prints the relative RMSE; exits 1 above MAX_RMSE (default 0.08), when three.js did not
+// use the vertex colours (or the lightmap on TEXCOORD_1), or on any error. `colors` and
+// `lightmap` also fail when more than 0.1 % of the pixels are darker than half of ours
+// (black texels showing through); `uniform:L` (a furnace, where every surface has one
+// radiance) fails when any pixel is more than 2 % off L: a seam, an unfilled texel or
+// a texel bled from another chart shows at once.
 import http from 'http';
 import fs from 'fs';
 import path from 'path';
@@ -12,7 +17,8 @@ import { fileURLToPath } from 'url';
 import { chromium } from 'playwright-core';
 import { PNG } from 'pngjs';
 
-const [glb, ours, out, maxArg] = process.argv.slice(2);
+const [glb, ours, out, maxArg, modeArg] = process.argv.slice(2);
+const mode = modeArg || 'colors';
 const max = maxArg ? +maxArg : 0.08;
 const SS = 4;
 const here = path.dirname(fileURLToPath(import.meta.url));
@@ -91,10 +97,35 @@ try {
     return Math.sqrt(se / n) / Math.max(sum / n, 1e-30);
   };
   const all = metric(false), rmse = metric(true);
-  console.log(`three.js r${info.three}: ${info.unlit} unlit meshes, ${info.vertexColors} with vertex colours; ` +
+  // Dark texels showing through (unfilled or black lightmap texels along chart borders):
+  // pixels at less than half of our render's luminance where ours is not dark.
+  const lum = (v, p) => 0.2126 * v(p, 0) + 0.7152 * v(p, 1) + 0.0722 * v(p, 2);
+  const oursL = p => lum((q, c) => lin(ref.data[4 * q + c]), p), theirsL = p => lum((q, c) => small[3 * q + c], p);
+  let meanL = 0;
+  for (let p = 0; p < W * H; p++) meanL += oursL(p) / (W * H);
+  let dark = 0;
+  for (let p = 0; p < W * H; p++) {
+    if (!masked(p) && oursL(p) > 0.1 * meanL && theirsL(p) < 0.5 * oursL(p)) dark++;
+  }
+  console.log(`three.js r${info.three}: ${info.unlit} unlit meshes, ${info.vertexColors} with vertex colours, ` +
+    `${info.lightmaps} with the lightmap on TEXCOORD_1; ` +
     `relative RMSE against ${path.basename(ours)} ${(100 * rmse).toFixed(2)} % light masked (limit ${(100 * max).toFixed(1)} %), ` +
-    `${(100 * all).toFixed(2)} % unmasked -> ${out}`);
-  if (!(rmse <= max) || info.unlit === 0 || info.vertexColors === 0) status = 1;
+    `${(100 * all).toFixed(2)} % unmasked; ${dark} pixels darker than half of ours -> ${out}`);
+  const used = mode === 'colors' ? info.unlit > 0 && info.vertexColors > 0 : info.lightmaps > 0;
+  if (!(rmse <= max) || !used || dark > 0.001 * W * H) status = 1;
+  if (mode.startsWith('uniform:')) {
+    const want = +mode.slice(8);
+    let off = 0, worst = 0;
+    for (let p = 0; p < W * H; p++) {
+      for (let c = 0; c < 3; c++) {
+        const d = Math.abs(small[3 * p + c] - want) / want;
+        worst = Math.max(worst, d);
+        if (d > 0.02) off++;
+      }
+    }
+    console.log(`uniform ${want}: ${off} pixel channels more than 2 % off, worst ${(100 * worst).toFixed(2)} %`);
+    if (off > 0) status = 1;
+  }
 } catch (e) {
   console.log(`three.js check error: ${e.message}`);
   status = 1;

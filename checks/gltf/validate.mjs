@@ -9,7 +9,9 @@ for (const f of process.argv.slice(2)) {
   const i = r.issues;
   console.log(`${f}: ${i.numErrors} errors, ${i.numWarnings} warnings, ${i.numInfos} infos, ${i.numHints} hints ` +
     `(${r.info.drawCallCount} draw calls, ${r.info.totalVertexCount} vertices, extensions used: ${(r.info.extensionsUsed || []).join(', ')})`);
-  for (const m of i.messages.slice(0, 20)) {
+  // Errors and warnings in full; infos (e.g. TEXCOORD_0, written for texturing but not used
+  // by the baked materials) and hints only counted.
+  for (const m of i.messages.filter(m => m.severity <= 1).slice(0, 20)) {
     console.log(`  ${['error', 'warning', 'info', 'hint'][m.severity]} ${m.code} at ${m.pointer || '-'}: ${m.message}`);
   }
   if (i.numErrors + i.numWarnings > 0) bad++;

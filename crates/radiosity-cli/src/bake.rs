@@ -7,8 +7,10 @@ use std::time::Instant;
 
 use anyhow::{bail, Result};
 use clap::Args;
-use radiosity::output::gltf::{auto_exposure, vertex_colors_glb, Options};
+use radiosity::mesh::atlas::Atlas;
+use radiosity::output::gltf::{auto_exposure, baked_glb, vertex_colors_glb, Options};
 use radiosity::pipeline::solve_scene;
+use radiosity::render::{gather, lightmap};
 
 use crate::common::{energy_summary, exit_code, write_atomic, Outputs, SolveFlags};
 use crate::progress::CliProgress;
@@ -27,6 +29,21 @@ pub struct BakeArgs {
     /// the 97th percentile of the surfaces' radiance, as `render` picks for images].
     #[arg(long, value_name = "K")]
     pub exposure: Option<f64>,
+    /// Also bake a lightmap: a second UV set (TEXCOORD_1) from an automatic atlas, texels
+    /// filled by the final gather (sharp shadows whatever the mesh), shown through every
+    /// material's emissive texture; the linear radiance is also written beside the GLB as
+    /// FILE.lightmap.exr.
+    #[arg(long)]
+    pub lightmap: bool,
+    /// Lightmap side in texels (8 to 16384).
+    #[arg(long, value_name = "N", default_value_t = radiosity::mesh::atlas::DEFAULT_SIZE)]
+    pub lightmap_size: usize,
+    /// World units per lightmap texel [default: as small as the lightmap allows].
+    #[arg(long, value_name = "S")]
+    pub texel_size: Option<f64>,
+    /// Lightmap texels: shadow rays per emitter, as N × N.
+    #[arg(long, value_name = "N", default_value_t = 4)]
+    pub shadow_rays: usize,
 }
 
 pub fn run(a: BakeArgs) -> Result<ExitCode> {
@@ -40,9 +57,19 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         Some(e) if e == "glb" => {}
         _ => bail!("-o {}: bake writes glTF binary; name the file .glb", a.output.display()),
     }
+    if a.shadow_rays == 0 || a.shadow_rays > 16 {
+        bail!("--shadow-rays must be between 1 and 16");
+    }
+    if !a.lightmap && (a.texel_size.is_some() || a.lightmap_size != radiosity::mesh::atlas::DEFAULT_SIZE) {
+        bail!("--lightmap-size and --texel-size need --lightmap");
+    }
+    let exr_path = a.lightmap.then(|| a.output.with_extension("lightmap.exr"));
     let settings = a.solve.settings()?;
     let mut outputs = Outputs::default();
     outputs.add("-o", &a.output);
+    if let Some(p) = &exr_path {
+        outputs.add("lightmap EXR", p);
+    }
     if let Some(p) = &a.solve.report {
         outputs.add("--report", p);
     }
@@ -56,10 +83,51 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     let t = Instant::now();
     let opts = Options {
         exposure,
-        camera: solved.scene.camera.clone(),
+        camera: solved.scene.camera,
         generator: format!("radiosity {}", env!("CARGO_PKG_VERSION")),
     };
-    let (glb, stats) = vertex_colors_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, &opts)?;
+    let mut lightmap_line = None;
+    let (glb, stats) = if a.lightmap {
+        let t_map = Instant::now();
+        let atlas_opts = radiosity::mesh::atlas::Options { size: a.lightmap_size, texel: a.texel_size, ..Default::default() };
+        let atlas = Atlas::build(&solved.scene, &atlas_opts)?;
+        let axis = solved.default_gather_axis();
+        let indirect = solved.indirect(axis > 0);
+        let gopts = gather::Options {
+            width: atlas.size,
+            height: atlas.size,
+            spp_axis: 1,
+            shadow_axis: a.shadow_rays,
+            gather_axis: axis,
+            seed: a.solve.seed,
+        };
+        let element_l: Vec<_> = b.iter().map(|x| *x / std::f64::consts::PI).collect();
+        let (img, st) = lightmap::render(&solved.scene, &solved.mesh, &solved.rays, &indirect, &atlas, &element_l, &gopts, &progress);
+        if radiosity::Progress::should_stop(&progress) {
+            return Err(radiosity::Error::Cancelled.into());
+        }
+        let png = radiosity::output::png::encode(&img, Some(exposure))?;
+        if let Some(p) = &exr_path {
+            write_atomic(p, &radiosity::output::exr::encode(&img)?)?;
+        }
+        lightmap_line = Some(format!(
+            "lightmap {n}² ({}): {} charts, texel {:.4e} scene units, {:.1} % of the texture in charts, {:.1} % covered by surfaces; \
+             {} texels gathered, {} dilated, {} flat; {:.2} s",
+            exr_path.as_ref().map_or(String::new(), |p| p.display().to_string()),
+            atlas.charts.len(),
+            atlas.texel,
+            100.0 * atlas.used(),
+            100.0 * atlas.covered(&solved.scene),
+            st.shaded,
+            st.dilated,
+            st.flat,
+            t_map.elapsed().as_secs_f64(),
+            n = atlas.size,
+        ));
+        baked_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, Some((&atlas, &png)), &opts)?
+    } else {
+        vertex_colors_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, &opts)?
+    };
     write_atomic(&a.output, &glb)?;
     let mut report = solved.report();
     report.timings.load = load_s;
@@ -72,6 +140,9 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     if !a.solve.quiet {
         if let Some(e) = &report.energy {
             eprintln!("{}", energy_summary(e));
+        }
+        if let Some(l) = &lightmap_line {
+            eprintln!("{l}");
         }
         eprintln!(
             "wrote {} ({} triangles, {} vertices, {:.1} MB) at exposure {exposure:.4e}{} in {:.2} s",

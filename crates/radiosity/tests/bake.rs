@@ -47,7 +47,7 @@ fn colors(json: &Value, bin: &[u8]) -> Vec<[f32; 3]> {
 }
 
 fn bake(solved: &Solved, exposure: f64) -> (Vec<u8>, radiosity::output::gltf::Stats) {
-    let opts = Options { exposure, camera: solved.scene.camera.clone(), generator: "test".into() };
+    let opts = Options { exposure, camera: solved.scene.camera, generator: "test".into() };
     vertex_colors_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, &opts).unwrap()
 }
 
@@ -96,7 +96,7 @@ fn baked_cornell_box_reads_back_as_the_same_scene_and_light() {
     want.sort_unstable();
     assert_eq!(names, want);
     // The camera: position, view direction, up and field of view.
-    let (c, w) = (back.camera.unwrap(), solved.scene.camera.clone().unwrap());
+    let (c, w) = (back.camera.unwrap(), solved.scene.camera.unwrap());
     assert!((c.position - w.position).length() < 1e-3, "{c:?} against {w:?}");
     let dir = |c: &radiosity::scene::Camera| (c.look_at - c.position).normalize();
     assert!((dir(&c) - dir(&w)).length() < 1e-6 && (c.up.normalize() - w.up.normalize()).length() < 1e-6);
@@ -115,4 +115,72 @@ fn baked_cornell_box_reads_back_as_the_same_scene_and_light() {
     assert_eq!(stats.clipped, clipped);
     // The automatic exposure clips little but the light and its neighbourhood.
     assert!(clipped < got.len() / 20, "{clipped} of {} clipped", got.len());
+}
+
+/// The Cornell box's atlas: every polygon mapped without distortion at one texel size
+/// (density uniform to 1e-9), every chart's polygons at least `padding` texels inside its
+/// rectangle, rectangles disjoint inside the texture, and most of the texture used.
+#[test]
+fn cornell_atlas_is_isometric_padded_disjoint_and_well_used() {
+    use radiosity::mesh::atlas::{Atlas, Options as AtlasOptions};
+    let scene = Scene::from_desc(builtin::by_name("cornell").unwrap()).unwrap();
+    let atlas = Atlas::build(&scene, &AtlasOptions { size: 512, ..Default::default() }).unwrap();
+    assert!(atlas.padding >= 2);
+    for (i, p) in scene.polygons.iter().enumerate() {
+        let t: Vec<(f64, f64)> = p.vertices.iter().map(|&x| atlas.texel_coords(i as u32, x)).collect();
+        for a in 0..t.len() {
+            for b in a + 1..t.len() {
+                let d_tex = ((t[a].0 - t[b].0).powi(2) + (t[a].1 - t[b].1).powi(2)).sqrt();
+                let d_world = (p.vertices[a] - p.vertices[b]).length() / atlas.texel;
+                assert!((d_tex - d_world).abs() < 1e-9 * d_world, "polygon {i}: {d_tex} texels for {d_world}");
+            }
+        }
+        let c = &atlas.charts[atlas.chart_of[i] as usize];
+        let pad = atlas.padding as f64 - 1e-9;
+        for &(x, y) in &t {
+            assert!(x >= c.x as f64 + pad && x <= (c.x + c.width) as f64 - pad, "polygon {i}: x {x} in chart {c:?}");
+            assert!(y >= c.y as f64 + pad && y <= (c.y + c.height) as f64 - pad, "polygon {i}: y {y} in chart {c:?}");
+        }
+    }
+    let mut owner = vec![u32::MAX; 512 * 512];
+    for (k, c) in atlas.charts.iter().enumerate() {
+        assert!(c.x + c.width <= 512 && c.y + c.height <= 512);
+        for y in c.y..c.y + c.height {
+            for x in c.x..c.x + c.width {
+                assert_eq!(owner[y * 512 + x], u32::MAX, "charts {k} and {} overlap", owner[y * 512 + x]);
+                owner[y * 512 + x] = k as u32;
+            }
+        }
+    }
+    let (used, covered) = (atlas.used(), atlas.covered(&scene));
+    eprintln!("Cornell atlas 512²: {} charts, {:.1} % in charts, {:.1} % covered", atlas.charts.len(), 100.0 * used, 100.0 * covered);
+    assert!(used >= 0.75 && covered >= 0.6, "used {used}, covered {covered}");
+}
+
+/// A lightmap of the furnace box: every texel of every chart, padding included, holds the
+/// closed form L = L_e/(1 − ρ) = 2 (no unfilled, no black texel), gathered or dilated.
+#[test]
+fn furnace_lightmap_texels_are_all_the_closed_form() {
+    use radiosity::mesh::atlas::{Atlas, Options as AtlasOptions};
+    use radiosity::render::{gather, lightmap};
+    let scene = Scene::from_desc(builtin::furnace(0.5, 1.0)).unwrap();
+    let s = Settings { mesh_size: Some(0.25), solver: radiosity::solve::Solver::Direct, ..Default::default() };
+    let solved = solve_scene(scene, &s, &NoProgress).unwrap();
+    let atlas = Atlas::build(&solved.scene, &AtlasOptions { size: 64, ..Default::default() }).unwrap();
+    let indirect = solved.indirect(false);
+    let opts = gather::Options { width: 64, height: 64, spp_axis: 1, shadow_axis: 2, gather_axis: 0, seed: 1 };
+    let l: Vec<_> = solved.solution.display_radiosity().iter().map(|b| *b / PI).collect();
+    let (img, st) = lightmap::render(&solved.scene, &solved.mesh, &solved.rays, &indirect, &atlas, &l, &opts, &NoProgress);
+    assert!(st.shaded > 1000 && st.dilated > 0, "{st:?}");
+    let mut n = 0;
+    for c in &atlas.charts {
+        for y in c.y..c.y + c.height {
+            for x in c.x..c.x + c.width {
+                let v = img.pixels[y * 64 + x];
+                assert!((v.x - 2.0).abs() < 2e-3 && (v.z - 2.0).abs() < 2e-3, "texel ({x}, {y}): {v}");
+                n += 1;
+            }
+        }
+    }
+    assert_eq!(n, st.shaded + st.dilated + st.flat);
 }

@@ -12,6 +12,7 @@
 pub mod coverage;
 pub mod locate;
 pub mod adaptive;
+pub mod atlas;
 mod uniform;
 
 use glam::DVec3;

@@ -20,6 +20,15 @@
 //! `KHR_materials_unlit` lights the surfaces again with its own lights (the extension is
 //! used, not required). Emitters also get `emissiveFactor` = their radiance × `k`, clipped.
 //!
+//! With a lightmap ([`baked_glb`]; texels from [`crate::render::lightmap`] on the atlas of
+//! [`crate::mesh::atlas`]) every primitive also gets `TEXCOORD_1` (the atlas) and
+//! `TEXCOORD_0` (its chart's planar coordinates in scene units), and every material shows
+//! the lightmap — radiance × exposure, 8-bit sRGB PNG in the buffer — as its
+//! `emissiveTexture` on texture coordinate 1, with a black base colour and no
+//! `KHR_materials_unlit`: core glTF that every viewer draws as is (emission is not lit).
+//! The vertex colours stay. `MOZ_lightmap` is not written (its texture multiplies the base
+//! colour, so it would need the irradiance).
+//!
 //! Geometry: one node per scene object (its name), one mesh with one triangle primitive
 //! per material; quadrilateral elements are split into two triangles; vertices are the
 //! mesh's, which are shared inside a patch and separate across patches, so light stays
@@ -123,6 +132,24 @@ impl Buffer {
         self.view_and_accessor(offset, data.len(), target, json::accessor::ComponentType::F32, json::accessor::Type::Vec3, min, max)
     }
 
+    fn push_f32x2(&mut self, data: &[[f32; 2]]) -> json::Index<json::Accessor> {
+        let offset = self.bytes.len();
+        for v in data {
+            for x in v {
+                self.bytes.extend(x.to_le_bytes());
+            }
+        }
+        self.view_and_accessor(
+            offset,
+            data.len(),
+            json::buffer::Target::ArrayBuffer,
+            json::accessor::ComponentType::F32,
+            json::accessor::Type::Vec2,
+            None,
+            None,
+        )
+    }
+
     fn push_u32(&mut self, data: &[u32]) -> json::Index<json::Accessor> {
         let offset = self.bytes.len();
         for x in data {
@@ -190,15 +217,18 @@ struct Part {
     local: BTreeMap<u32, u32>,
     vertices: Vec<u32>,
     normals: Vec<DVec3>,
+    /// The patch of every vertex (vertices are not shared across patches).
+    patches: Vec<u32>,
     indices: Vec<u32>,
 }
 
 impl Part {
-    fn vertex(&mut self, v: u32, n: DVec3) -> u32 {
+    fn vertex(&mut self, v: u32, n: DVec3, patch: u32) -> u32 {
         let next = self.vertices.len() as u32;
         *self.local.entry(v).or_insert_with(|| {
             self.vertices.push(v);
             self.normals.push(n);
+            self.patches.push(patch);
             next
         })
     }
@@ -216,6 +246,20 @@ fn camera_rotation(c: &Camera) -> DQuat {
 /// the radiosity per mesh vertex ([`crate::reconstruct::vertex_radiosity`] of the display
 /// radiosity).
 pub fn vertex_colors_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], opts: &Options) -> Result<(Vec<u8>, Stats)> {
+    baked_glb(scene, mesh, vertex_b, None, opts)
+}
+
+/// [`vertex_colors_glb`], and with `lightmap` = (atlas, PNG of radiance × exposure in
+/// sRGB) also `TEXCOORD_1` from the atlas and the lightmap as every material's
+/// `emissiveTexture` on it, over a black base colour: the core-glTF way to show baked
+/// radiance that every viewer follows (see the module docs).
+pub fn baked_glb(
+    scene: &Scene,
+    mesh: &Mesh,
+    vertex_b: &[Rgb],
+    lightmap: Option<(&crate::mesh::atlas::Atlas, &[u8])>,
+    opts: &Options,
+) -> Result<(Vec<u8>, Stats)> {
     if vertex_b.len() != mesh.positions.len() {
         return Err(Error::Invalid(format!("{} vertex values for {} vertices", vertex_b.len(), mesh.positions.len())));
     }
@@ -228,7 +272,7 @@ pub fn vertex_colors_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], opts: &Op
         let p = &scene.polygons[e.patch as usize];
         let part = parts.entry((p.object, p.material)).or_default();
         let n = e.vertex_count();
-        let ids: Vec<u32> = (0..n).map(|k| part.vertex(e.vertices[k], e.normal)).collect();
+        let ids: Vec<u32> = (0..n).map(|k| part.vertex(e.vertices[k], e.normal, e.patch)).collect();
         part.indices.extend([ids[0], ids[1], ids[2]]);
         if n == 4 {
             part.indices.extend([ids[0], ids[2], ids[3]]);
@@ -255,6 +299,58 @@ pub fn vertex_colors_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], opts: &Op
     }});
     root.asset.extras = Some(serde_json::value::to_raw_value(&extras).map_err(|e| Error::Invalid(e.to_string()))?);
 
+    // The lightmap image, stored first in the buffer.
+    let mut buf = Buffer { bytes: Vec::new(), views: Vec::new(), accessors: Vec::new() };
+    let lightmap_texture = match lightmap {
+        None => None,
+        Some((_, png)) => {
+            buf.bytes.extend_from_slice(png);
+            let view = json::Index::push(
+                &mut buf.views,
+                json::buffer::View {
+                    buffer: json::Index::new(0),
+                    byte_length: USize64::from(png.len()),
+                    byte_offset: Some(USize64(0)),
+                    byte_stride: None,
+                    name: Some("lightmap".into()),
+                    target: None,
+                    extensions: None,
+                    extras: Default::default(),
+                },
+            );
+            while buf.bytes.len() % 4 != 0 {
+                buf.bytes.push(0);
+            }
+            let image = root.push(json::Image {
+                buffer_view: Some(view),
+                mime_type: Some(json::image::MimeType("image/png".into())),
+                name: Some("lightmap".into()),
+                uri: None,
+                extensions: None,
+                extras: Default::default(),
+            });
+            let sampler = root.push(json::texture::Sampler {
+                mag_filter: Some(Valid(json::texture::MagFilter::Linear)),
+                min_filter: Some(Valid(json::texture::MinFilter::Linear)),
+                name: None,
+                wrap_s: Valid(json::texture::WrappingMode::ClampToEdge),
+                wrap_t: Valid(json::texture::WrappingMode::ClampToEdge),
+                extensions: None,
+                extras: Default::default(),
+            });
+            Some(root.push(json::Texture {
+                name: Some("lightmap".into()),
+                sampler: Some(sampler),
+                source: image,
+                extensions: None,
+                extras: Default::default(),
+            }))
+        }
+    };
+    if lightmap.is_some() {
+        root.extensions_used.clear();
+    }
+
     // Materials used, in scene order.
     let mut mat_index: BTreeMap<u32, json::Index<json::Material>> = BTreeMap::new();
     for &(_, m) in parts.keys() {
@@ -266,27 +362,44 @@ pub fn vertex_colors_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], opts: &Op
         let extras = serde_json::json!({ "radiosity": {
             "reflectance": mat.reflectance.to_array(), "emission": mat.emission.to_array()
         }});
-        let idx = root.push(json::Material {
-            name: Some(mat.name.clone()),
-            pbr_metallic_roughness: json::material::PbrMetallicRoughness {
-                base_color_factor: json::material::PbrBaseColorFactor([1.0; 4]),
-                metallic_factor: json::material::StrengthFactor(0.0),
-                roughness_factor: json::material::StrengthFactor(1.0),
+        let extras = Some(serde_json::value::to_raw_value(&extras).map_err(|e| Error::Invalid(e.to_string()))?);
+        let material = match lightmap_texture {
+            None => json::Material {
+                name: Some(mat.name.clone()),
+                pbr_metallic_roughness: json::material::PbrMetallicRoughness {
+                    base_color_factor: json::material::PbrBaseColorFactor([1.0; 4]),
+                    metallic_factor: json::material::StrengthFactor(0.0),
+                    roughness_factor: json::material::StrengthFactor(1.0),
+                    ..Default::default()
+                },
+                emissive_factor: json::material::EmissiveFactor([emissive.x as f32, emissive.y as f32, emissive.z as f32]),
+                double_sided: false,
+                extras,
+                extensions: Some(json::extensions::material::Material {
+                    unlit: Some(json::extensions::material::Unlit {}),
+                    ..Default::default()
+                }),
                 ..Default::default()
             },
-            emissive_factor: json::material::EmissiveFactor([emissive.x as f32, emissive.y as f32, emissive.z as f32]),
-            double_sided: false,
-            extras: Some(serde_json::value::to_raw_value(&extras).map_err(|e| Error::Invalid(e.to_string()))?),
-            extensions: Some(json::extensions::material::Material {
-                unlit: Some(json::extensions::material::Unlit {}),
+            Some(tex) => json::Material {
+                name: Some(mat.name.clone()),
+                pbr_metallic_roughness: json::material::PbrMetallicRoughness {
+                    base_color_factor: json::material::PbrBaseColorFactor([0.0, 0.0, 0.0, 1.0]),
+                    metallic_factor: json::material::StrengthFactor(0.0),
+                    roughness_factor: json::material::StrengthFactor(1.0),
+                    ..Default::default()
+                },
+                emissive_factor: json::material::EmissiveFactor([1.0; 3]),
+                emissive_texture: Some(json::texture::Info { index: tex, tex_coord: 1, extensions: None, extras: Default::default() }),
+                double_sided: false,
+                extras,
                 ..Default::default()
-            }),
-            ..Default::default()
-        });
+            },
+        };
+        let idx = root.push(material);
         mat_index.insert(m, idx);
     }
 
-    let mut buf = Buffer { bytes: Vec::new(), views: Vec::new(), accessors: Vec::new() };
     let mut meshes: BTreeMap<u32, Vec<json::mesh::Primitive>> = BTreeMap::new();
     for ((object, m), part) in &parts {
         let pos: Vec<[f32; 3]> = part.vertices.iter().map(|&v| mesh.positions[v as usize].as_vec3().to_array()).collect();
@@ -304,12 +417,33 @@ pub fn vertex_colors_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], opts: &Op
         let a_nor = buf.push_f32x3(&nor, json::buffer::Target::ArrayBuffer, false);
         let a_col = buf.push_f32x3(&col, json::buffer::Target::ArrayBuffer, false);
         let a_idx = buf.push_u32(&part.indices);
+        // TEXCOORD_0: each chart's own planar coordinates in scene units (a texture space
+        // with no seams inside a chart); TEXCOORD_1: the lightmap atlas.
+        let uvs = lightmap.map(|(atlas, _)| {
+            let (uv0, uv1): (Vec<[f32; 2]>, Vec<[f32; 2]>) = part
+                .vertices
+                .iter()
+                .zip(&part.patches)
+                .map(|(&v, &p)| {
+                    let x = mesh.positions[v as usize];
+                    let c = &atlas.charts[atlas.chart_of[p as usize] as usize];
+                    let d = x - c.origin;
+                    let (u, w) = atlas.uv(p, x);
+                    ([d.dot(c.u) as f32, d.dot(c.v) as f32], [u as f32, w as f32])
+                })
+                .unzip();
+            (buf.push_f32x2(&uv0), buf.push_f32x2(&uv1))
+        });
         stats.vertices += pos.len();
         stats.triangles += part.indices.len() / 3;
         let mut attributes = BTreeMap::new();
         attributes.insert(Valid(json::mesh::Semantic::Positions), a_pos);
         attributes.insert(Valid(json::mesh::Semantic::Normals), a_nor);
         attributes.insert(Valid(json::mesh::Semantic::Colors(0)), a_col);
+        if let Some((a0, a1)) = uvs {
+            attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), a0);
+            attributes.insert(Valid(json::mesh::Semantic::TexCoords(1)), a1);
+        }
         meshes.entry(*object).or_default().push(json::mesh::Primitive {
             attributes,
             extensions: None,

@@ -108,6 +108,134 @@ fn pixel_pattern(side: usize, rng: &mut crate::sampling::Rng, out: &mut Vec<(f64
     }
 }
 
+/// The light sources and settings of the final gather, shared by every position it shades:
+/// image pixels ([`render`]) and lightmap texels ([`crate::render::lightmap`]).
+pub struct Shader<'a> {
+    scene: &'a Scene,
+    mesh: &'a Mesh,
+    rays: &'a SceneRays,
+    indirect: &'a Indirect,
+    ems: Vec<crate::direct::Emitter>,
+    sky: Option<Rgb>,
+    sun: Option<crate::scene::Sun>,
+    /// Exitance of the sky seen by a gather ray that leaves the scene.
+    sky_h: Rgb,
+    shadow_axis: usize,
+    /// Gather (or sky) rays per position along each axis; 0: none.
+    gather_axis: usize,
+}
+
+/// The random points one pixel (or texel) draws for its `positions` positions: one shadow
+/// pattern per emitter looped over (one shared when they are sampled), the gather
+/// directions, the sun's points.
+#[derive(Default)]
+pub struct Patterns {
+    shadows: Vec<Vec<(f64, f64)>>,
+    gather: Vec<(f64, f64)>,
+    sun: Vec<(f64, f64)>,
+    scratch: Vec<(f64, f64)>,
+}
+
+impl<'a> Shader<'a> {
+    /// The shader of a solved scene; `opts` gives the shadow and gather rays per position.
+    pub fn new(scene: &'a Scene, mesh: &'a Mesh, rays: &'a SceneRays, indirect: &'a Indirect, opts: &Options) -> Self {
+        let sky = scene.lit_sky().map(|s| s.radiance);
+        let gather_axis = match indirect {
+            Indirect::Gathered { .. } => opts.gather_axis.max(1),
+            // Rays for the sky alone.
+            Indirect::Interpolated(_) if sky.is_some() => SKY_AXIS,
+            Indirect::Interpolated(_) => 0,
+        };
+        Shader {
+            scene,
+            mesh,
+            rays,
+            indirect,
+            ems: emitters(scene),
+            sky,
+            sun: scene.lit_sky().and_then(|s| s.lit_sun()),
+            sky_h: sky.map_or(Rgb::ZERO, |l| l * std::f64::consts::PI),
+            shadow_axis: opts.shadow_axis.max(1),
+            gather_axis,
+        }
+    }
+
+    /// Draws the random points of one pixel with `side × side` positions.
+    pub fn draw(&self, side: usize, rng: &mut crate::sampling::Rng, pat: &mut Patterns) {
+        let npat = if self.ems.len() <= LOOP_EMITTERS { self.ems.len() } else { 1 };
+        pat.shadows.resize_with(npat, Vec::new);
+        for p in pat.shadows.iter_mut() {
+            pixel_pattern(side * self.shadow_axis, rng, p);
+        }
+        if self.gather_axis > 0 {
+            pixel_pattern(side * self.gather_axis, rng, &mut pat.gather);
+        }
+        if self.sun.is_some() {
+            pixel_pattern(side * self.shadow_axis, rng, &mut pat.sun);
+        }
+    }
+
+    /// What a camera ray in direction `dir` that meets nothing sees: the sky, and the
+    /// sun's disk.
+    pub fn background(&self, dir: glam::DVec3) -> Rgb {
+        let mut l = self.sky.unwrap_or(Rgb::ZERO);
+        if let Some(sun) = &self.sun {
+            if dir.normalize().dot(sun.direction) >= sun.cos_radius() && sun.angular_diameter_deg > 0.0 {
+                l += sun.radiance();
+            }
+        }
+        l
+    }
+
+    /// Outgoing radiance at `p` on the front of element `e`, with the `k`-th position's
+    /// share of `pat`. Returns the radiance and the rays cast.
+    pub fn shade(&self, e: u32, p: glam::DVec3, k: usize, pat: &mut Patterns) -> (Rgb, u64) {
+        let (scene, mesh, rays) = (self.scene, self.mesh, self.rays);
+        let el = &mesh.elements[e as usize];
+        let poly = &scene.polygons[el.patch as usize];
+        let mat = &scene.materials[poly.material as usize];
+        let mut l = mat.emission;
+        if mat.reflectance.max_element() <= 0.0 {
+            return (l, 0);
+        }
+        let m2 = self.shadow_axis * self.shadow_axis;
+        let mut nrays = 0;
+        let (mut hd, r) = if self.ems.len() <= LOOP_EMITTERS {
+            let shadows = &pat.shadows;
+            direct_irradiance(scene, rays, &self.ems, p, el.normal, el.patch, |em| &shadows[em][k * m2..(k + 1) * m2])
+        } else {
+            let pts = &pat.shadows[0][k * m2..(k + 1) * m2];
+            direct_irradiance_sampled(scene, rays, &self.ems, p, el.normal, el.patch, pts, &mut pat.scratch)
+        };
+        nrays += r;
+        if let Some(sun) = &self.sun {
+            let pts = &pat.sun[k * m2..(k + 1) * m2];
+            let (f, r) = crate::sky::sun_factor_at(rays, sun, p, el.normal, el.patch, pts);
+            hd += sun.irradiance * f;
+            nrays += r;
+        }
+        if !scene.lights.is_empty() {
+            let (hl, r) = crate::lights::lights_at(rays, &scene.lights, p, el.normal, el.patch);
+            hd += hl;
+            nrays += r;
+        }
+        let g2 = self.gather_axis * self.gather_axis;
+        let dirs = &pat.gather[(k * g2).min(pat.gather.len())..((k + 1) * g2).min(pat.gather.len())];
+        nrays += g2 as u64;
+        let hi = match self.indirect {
+            Indirect::Interpolated(hv) if g2 > 0 => {
+                interpolate(mesh, e, p, hv) + gathered(mesh, rays, None, self.sky_h, p, el.normal, el.patch, dirs)
+            }
+            Indirect::Interpolated(hv) => interpolate(mesh, e, p, hv),
+            Indirect::Gathered { reflected, locator } => {
+                gathered(mesh, rays, Some((locator, reflected)), self.sky_h, p, el.normal, el.patch, dirs)
+            }
+        };
+        l += mat.reflectance * (hd + hi) * (1.0 / std::f64::consts::PI);
+        (l, nrays)
+    }
+}
+
 /// Renders by final gathering, with the indirect light from `indirect` (see the module
 /// docs). Returns the image and the rays cast.
 #[allow(clippy::too_many_arguments)]
@@ -124,12 +252,7 @@ pub fn render(
     let (w, h) = (opts.width, opts.height);
     let s = opts.spp_axis.max(1);
     let inv_spp = 1.0 / (s * s) as f64;
-    let inv_pi = 1.0 / std::f64::consts::PI;
-    let ems = emitters(scene);
-    let sky = scene.lit_sky().map(|s| s.radiance);
-    let sun = scene.lit_sky().and_then(|s| s.lit_sun());
-    // Exitance of the sky seen by a gather ray that leaves the scene.
-    let sky_h = sky.map_or(Rgb::ZERO, |l| l * std::f64::consts::PI);
+    let shader = Shader::new(scene, mesh, rays, indirect, opts);
     progress.begin("final gather", h as u64);
     let stopped = AtomicBool::new(false);
     let mut img = Image::new(w, h);
@@ -144,89 +267,25 @@ pub fn render(
             }
             let mut nrays = 0u64;
             let mut sub = Vec::new();
-            let m2 = opts.shadow_axis.max(1) * opts.shadow_axis.max(1);
-            // One pattern per emitter when they are looped over; one shared pattern when
-            // emitters are sampled.
-            let npat = if ems.len() <= LOOP_EMITTERS { ems.len() } else { 1 };
-            let mut patterns: Vec<Vec<(f64, f64)>> = vec![Vec::new(); npat];
-            let g = match indirect {
-                Indirect::Gathered { .. } => opts.gather_axis.max(1),
-                // Rays for the sky alone.
-                Indirect::Interpolated(_) if sky.is_some() => SKY_AXIS,
-                Indirect::Interpolated(_) => 0,
-            };
-            let g2 = g * g;
-            let mut gather_pattern = Vec::new();
-            let mut sun_pattern = Vec::new();
-            let mut scratch = Vec::new();
+            let mut pat = Patterns::default();
             for (x, px) in row.iter_mut().enumerate() {
                 let mut rng = rng_for(opts.seed, (y * w + x) as u64);
                 stratified(s, &mut rng, &mut sub);
-                for pat in patterns.iter_mut() {
-                    pixel_pattern(s * opts.shadow_axis.max(1), &mut rng, pat);
-                }
-                if g > 0 {
-                    pixel_pattern(s * g, &mut rng, &mut gather_pattern);
-                }
-                if sun.is_some() {
-                    pixel_pattern(s * opts.shadow_axis.max(1), &mut rng, &mut sun_pattern);
-                }
+                shader.draw(s, &mut rng, &mut pat);
                 let mut acc = Rgb::ZERO;
                 for (k, &(sx, sy)) in sub.iter().enumerate() {
                     let dir = cam.direction(x as f64 + sx, y as f64 + sy);
                     nrays += 1;
                     let Some((e, p)) = tracer.trace(cam.eye, dir) else {
-                        acc += sky.unwrap_or(Rgb::ZERO);
-                        if let Some(sun) = &sun {
-                            if dir.normalize().dot(sun.direction) >= sun.cos_radius() && sun.angular_diameter_deg > 0.0 {
-                                acc += sun.radiance();
-                            }
-                        }
+                        acc += shader.background(dir);
                         continue;
                     };
-                    let el = &mesh.elements[e as usize];
-                    if el.normal.dot(dir) >= 0.0 {
+                    if mesh.elements[e as usize].normal.dot(dir) >= 0.0 {
                         continue; // back side of a one-sided surface
                     }
-                    let poly = &scene.polygons[el.patch as usize];
-                    let mat = &scene.materials[poly.material as usize];
-                    let mut l = mat.emission;
-                    if mat.reflectance.max_element() > 0.0 {
-                        let (hd, r) = if ems.len() <= LOOP_EMITTERS {
-                            direct_irradiance(scene, rays, &ems, p, el.normal, el.patch, |em| {
-                                &patterns[em][k * m2..(k + 1) * m2]
-                            })
-                        } else {
-                            let pat = &patterns[0][k * m2..(k + 1) * m2];
-                            direct_irradiance_sampled(scene, rays, &ems, p, el.normal, el.patch, pat, &mut scratch)
-                        };
-                        nrays += r;
-                        let mut hd = hd;
-                        if let Some(sun) = &sun {
-                            let pts = &sun_pattern[k * m2..(k + 1) * m2];
-                            let (f, r) = crate::sky::sun_factor_at(rays, sun, p, el.normal, el.patch, pts);
-                            hd += sun.irradiance * f;
-                            nrays += r;
-                        }
-                        if !scene.lights.is_empty() {
-                            let (hl, r) = crate::lights::lights_at(rays, &scene.lights, p, el.normal, el.patch);
-                            hd += hl;
-                            nrays += r;
-                        }
-                        let dirs = &gather_pattern[k * g2..(k + 1) * g2];
-                        nrays += g2 as u64;
-                        let hi = match indirect {
-                            Indirect::Interpolated(hv) if g2 > 0 => {
-                                interpolate(mesh, e, p, hv) + gathered(mesh, rays, None, sky_h, p, el.normal, el.patch, dirs)
-                            }
-                            Indirect::Interpolated(hv) => interpolate(mesh, e, p, hv),
-                            Indirect::Gathered { reflected, locator } => {
-                                gathered(mesh, rays, Some((locator, reflected)), sky_h, p, el.normal, el.patch, dirs)
-                            }
-                        };
-                        l += mat.reflectance * (hd + hi) * inv_pi;
-                    }
+                    let (l, r) = shader.shade(e, p, k, &mut pat);
                     acc += l;
+                    nrays += r;
                 }
                 *px = acc * inv_spp;
             }

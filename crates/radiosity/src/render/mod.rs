@@ -12,6 +12,7 @@
 pub mod camera;
 pub mod gather;
 pub mod gouraud;
+pub mod lightmap;
 pub mod raster;
 
 pub use camera::PinholeCamera;
