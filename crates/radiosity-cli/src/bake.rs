@@ -76,6 +76,13 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     outputs.check()?;
     a.solve.init_threads()?;
     let (scene, load_s) = a.solve.load_scene()?;
+    // The atlas depends on the scene alone: one that cannot fit is refused before the solve.
+    let atlas = if a.lightmap {
+        let opts = radiosity::mesh::atlas::Options { size: a.lightmap_size, texel: a.texel_size, ..Default::default() };
+        Some(Atlas::build(&scene, &opts)?)
+    } else {
+        None
+    };
     let progress = CliProgress::new(a.solve.quiet);
     let solved = solve_scene(scene, &settings, &progress)?;
     let b = solved.solution.display_radiosity();
@@ -87,10 +94,8 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         generator: format!("radiosity {}", env!("CARGO_PKG_VERSION")),
     };
     let mut lightmap_line = None;
-    let (glb, stats) = if a.lightmap {
+    let (glb, stats) = if let Some(atlas) = &atlas {
         let t_map = Instant::now();
-        let atlas_opts = radiosity::mesh::atlas::Options { size: a.lightmap_size, texel: a.texel_size, ..Default::default() };
-        let atlas = Atlas::build(&solved.scene, &atlas_opts)?;
         let axis = solved.default_gather_axis();
         let indirect = solved.indirect(axis > 0);
         let gopts = gather::Options {
@@ -102,7 +107,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
             seed: a.solve.seed,
         };
         let element_l: Vec<_> = b.iter().map(|x| *x / std::f64::consts::PI).collect();
-        let (img, st) = lightmap::render(&solved.scene, &solved.mesh, &solved.rays, &indirect, &atlas, &element_l, &gopts, &progress);
+        let (img, st) = lightmap::render(&solved.scene, &solved.mesh, &solved.rays, &indirect, atlas, &element_l, &gopts, &progress);
         if radiosity::Progress::should_stop(&progress) {
             return Err(radiosity::Error::Cancelled.into());
         }
@@ -124,7 +129,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
             t_map.elapsed().as_secs_f64(),
             n = atlas.size,
         ));
-        baked_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, Some((&atlas, &png)), &opts)?
+        baked_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, Some((atlas, &png)), &opts)?
     } else {
         vertex_colors_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, &opts)?
     };

@@ -1,7 +1,8 @@
 //! A lightmap atlas: every polygon mapped, without distortion, into a square texture.
 //!
-//! **Charts.** Polygons of one object that lie in one plane and share edges form a chart
-//! (two triangles of a glTF quad, the tiles of a floor): union–find over shared edges
+//! **Charts.** Polygons that lie in one plane and share edges form a chart (two triangles
+//! of a glTF quad, the tiles of a floor, a wall split between objects; merging across
+//! objects took the classroom's surfaces from 26.5 to 29.7 % of a 1024² atlas): union–find over shared edges
 //! (vertex positions equal to 1e-9 of the scene's size), same plane (normals within 1e-6,
 //! offsets within 1e-6 of the scene's size). Each chart is projected orthographically onto
 //! its plane — axis `u` along the longest edge of its first polygon, `v = n × u` — so every
@@ -48,7 +49,7 @@ impl Default for Options {
     }
 }
 
-/// One chart: coplanar, edge-connected polygons of one object.
+/// One chart: coplanar, edge-connected polygons (same side).
 #[derive(Clone, Debug)]
 pub struct Chart {
     /// Scene polygons.
@@ -256,7 +257,7 @@ fn pack(rects: &[(usize, usize)], size: usize) -> Option<Vec<(usize, usize)>> {
     Some(at)
 }
 
-/// Polygons grouped into charts: same object, same plane, connected through shared edges.
+/// Polygons grouped into charts: same plane and side, connected through shared edges.
 fn charts(scene: &Scene) -> Vec<Vec<u32>> {
     let n = scene.polygons.len();
     let diag = scene.diagonal().max(f64::MIN_POSITIVE);
@@ -278,8 +279,7 @@ fn charts(scene: &Scene) -> Vec<Vec<u32>> {
             match edges.get(&key) {
                 Some(&j) => {
                     let o = &scene.polygons[j as usize];
-                    let same_plane = o.object == p.object
-                        && o.back_side == p.back_side
+                    let same_plane = o.back_side == p.back_side
                         && o.normal.dot(p.normal) > 1.0 - 1e-6
                         && (o.normal.dot(o.vertices[0]) - p.normal.dot(vs[0])).abs() < 1e-6 * diag;
                     if same_plane {

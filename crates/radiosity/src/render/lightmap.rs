@@ -132,32 +132,29 @@ pub fn render(
     let mut filled: Vec<bool> = owner.iter().map(|&o| o != u32::MAX).collect();
     let mut stats = Stats { shaded: filled.iter().filter(|&&f| f).count(), rays: rays_cast, ..Default::default() };
     loop {
-        let mut next: Vec<(usize, Rgb)> = Vec::new();
-        for y in 0..n {
-            for x in 0..n {
-                let i = y * n + x;
-                if filled[i] || chart[i] == u32::MAX {
-                    continue;
-                }
-                let (mut sum, mut k) = (Rgb::ZERO, 0);
-                for dy in -1i64..=1 {
-                    for dx in -1i64..=1 {
-                        let (xx, yy) = (x as i64 + dx, y as i64 + dy);
-                        if xx < 0 || yy < 0 || xx >= n as i64 || yy >= n as i64 {
-                            continue;
-                        }
-                        let j = yy as usize * n + xx as usize;
-                        if filled[j] && chart[j] == chart[i] {
-                            sum += img.pixels[j];
-                            k += 1;
+        let next: Vec<(usize, Rgb)> = (0..n)
+            .into_par_iter()
+            .flat_map_iter(|y| {
+                let (img, filled, chart) = (&img, &filled, &chart);
+                (0..n).filter_map(move |x| {
+                    let i = y * n + x;
+                    if filled[i] || chart[i] == u32::MAX {
+                        return None;
+                    }
+                    let (mut sum, mut k) = (Rgb::ZERO, 0);
+                    for yy in y.saturating_sub(1)..(y + 2).min(n) {
+                        for xx in x.saturating_sub(1)..(x + 2).min(n) {
+                            let j = yy * n + xx;
+                            if filled[j] && chart[j] == chart[i] {
+                                sum += img.pixels[j];
+                                k += 1;
+                            }
                         }
                     }
-                }
-                if k > 0 {
-                    next.push((i, sum / k as f64));
-                }
-            }
-        }
+                    (k > 0).then(|| (i, sum / k as f64))
+                })
+            })
+            .collect();
         if next.is_empty() {
             break;
         }
@@ -168,25 +165,21 @@ pub fn render(
         }
     }
     // Charts that hold no texel centre: their elements' area-mean radiance.
-    for (c, ch) in atlas.charts.iter().enumerate() {
-        let first = ch.y * n + ch.x;
-        if filled[first] {
+    let mut sums = vec![(Rgb::ZERO, 0.0); atlas.charts.len()];
+    for (e, el) in mesh.elements.iter().enumerate() {
+        let s = &mut sums[atlas.chart_of[el.patch as usize] as usize];
+        s.0 += element_l[e] * el.area;
+        s.1 += el.area;
+    }
+    for (ch, (sum, area)) in atlas.charts.iter().zip(sums) {
+        if filled[ch.y * n + ch.x] {
             continue;
-        }
-        let (mut sum, mut area) = (Rgb::ZERO, 0.0);
-        for (e, el) in mesh.elements.iter().enumerate() {
-            if atlas.chart_of[el.patch as usize] as usize == c {
-                sum += element_l[e] * el.area;
-                area += el.area;
-            }
         }
         let mean = if area > 0.0 { sum / area } else { Rgb::ZERO };
         for y in ch.y..ch.y + ch.height {
-            for x in ch.x..ch.x + ch.width {
-                img.pixels[y * n + x] = mean;
-                stats.flat += 1;
-            }
+            img.pixels[y * n + ch.x..y * n + ch.x + ch.width].fill(mean);
         }
+        stats.flat += ch.width * ch.height;
     }
     (img, stats)
 }
