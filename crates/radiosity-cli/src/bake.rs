@@ -94,6 +94,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         generator: format!("radiosity {}", env!("CARGO_PKG_VERSION")),
     };
     let mut lightmap_line = None;
+    let mut lightmap_warning = None;
     let (glb, stats) = if let Some(atlas) = &atlas {
         let t_map = Instant::now();
         let axis = solved.default_gather_axis();
@@ -129,12 +130,22 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
             t_map.elapsed().as_secs_f64(),
             n = atlas.size,
         ));
+        let covered = atlas.covered(&solved.scene);
+        if covered < 0.2 {
+            lightmap_warning = Some(format!(
+                "the surfaces cover only {:.1} % of the lightmap ({} charts, most too small for their padding): \
+                 their light is coarse; raise --lightmap-size, or rely on the vertex colours",
+                100.0 * covered,
+                atlas.charts.len()
+            ));
+        }
         baked_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, Some((atlas, &png)), &opts)?
     } else {
         vertex_colors_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, &opts)?
     };
     write_atomic(&a.output, &glb)?;
     let mut report = solved.report();
+    report.warnings.extend(lightmap_warning.clone());
     report.timings.load = load_s;
     report.timings.render = t.elapsed().as_secs_f64();
     report.images.push(a.output.display().to_string());
@@ -148,6 +159,9 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         }
         if let Some(l) = &lightmap_line {
             eprintln!("{l}");
+        }
+        if let Some(w) = &lightmap_warning {
+            eprintln!("warning: {w}");
         }
         eprintln!(
             "wrote {} ({} triangles, {} vertices, {:.1} MB) at exposure {exposure:.4e}{} in {:.2} s",
