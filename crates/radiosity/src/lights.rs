@@ -18,8 +18,6 @@
 //! evaluates `H` per pixel ([`crate::render::gather`]), so shadows are sharp whatever the
 //! mesh.
 
-use rayon::prelude::*;
-
 use glam::DVec3;
 
 use crate::accel::SceneRays;
@@ -121,41 +119,25 @@ pub fn element_irradiance(
     if scene.lights.is_empty() {
         return (h, cast);
     }
-    progress.begin("lights", mesh.len() as u64);
-    const CHUNK: usize = 1024;
-    cast += h
-        .par_chunks_mut(CHUNK)
-        .enumerate()
-        .map(|(c, out)| {
-            use rand::RngExt;
-            if progress.should_stop() {
-                return 0;
-            }
-            let mut pts = Vec::new();
-            let mut cast = 0;
-            for (k, h) in out.iter_mut().enumerate() {
-                let e = c * CHUNK + k;
-                let el = &mesh.elements[e];
-                if receivers.open_cells.get(e).copied().unwrap_or(u64::MAX) == 0 {
-                    continue;
-                }
-                let mut rng = rng_for(SEED, e as u64);
-                stratified(DEFAULT_AXIS, &mut rng, &mut pts);
-                let mut sum = Rgb::ZERO;
-                for &(u, v) in &pts {
-                    let (u, v) = receivers.open_uv(e, u, v, || rng.random());
-                    let x = el.point(&mesh.positions, u, v);
-                    let (l, r) = lights_at(rays, &scene.lights, x, el.normal, el.patch);
-                    sum += l;
-                    cast += r;
-                }
-                *h += sum * (1.0 / pts.len() as f64);
-            }
-            progress.advance(out.len() as u64);
-            cast
-        })
-        .sum::<u64>();
-    progress.end();
+    cast += crate::progress::for_each_chunked(&mut h, "lights", progress, Vec::new, |e, h, pts| {
+        use rand::RngExt;
+        let el = &mesh.elements[e];
+        if receivers.open_cells.get(e).copied().unwrap_or(u64::MAX) == 0 {
+            return 0;
+        }
+        let mut rng = rng_for(SEED, e as u64);
+        stratified(DEFAULT_AXIS, &mut rng, pts);
+        let (mut sum, mut cast) = (Rgb::ZERO, 0);
+        for &(u, v) in pts.iter() {
+            let (u, v) = receivers.open_uv(e, u, v, || rng.random());
+            let x = el.point(&mesh.positions, u, v);
+            let (l, r) = lights_at(rays, &scene.lights, x, el.normal, el.patch);
+            sum += l;
+            cast += r;
+        }
+        *h += sum * (1.0 / pts.len() as f64);
+        cast
+    });
     (h, cast)
 }
 

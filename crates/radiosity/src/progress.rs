@@ -42,3 +42,34 @@ impl Progress for StopFlag {
         self.0.load(Ordering::Relaxed)
     }
 }
+
+/// Runs `f(i, &mut out[i])` for every item, in parallel chunks of 1024 (each chunk's
+/// scratch from `scratch()`), reporting progress as stage `stage`; once `progress` asks to
+/// stop, the chunks not started are left as they are. Returns the sum of `f`'s counts
+/// (rays cast).
+pub fn for_each_chunked<T: Send, S>(
+    out: &mut [T],
+    stage: &str,
+    progress: &dyn Progress,
+    scratch: impl Fn() -> S + Sync,
+    f: impl Fn(usize, &mut T, &mut S) -> u64 + Sync,
+) -> u64 {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1024;
+    progress.begin(stage, out.len() as u64);
+    let total = out
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(c, chunk)| {
+            if progress.should_stop() {
+                return 0;
+            }
+            let mut s = scratch();
+            let n: u64 = chunk.iter_mut().enumerate().map(|(k, x)| f(c * CHUNK + k, x, &mut s)).sum();
+            progress.advance(chunk.len() as u64);
+            n
+        })
+        .sum();
+    progress.end();
+    total
+}

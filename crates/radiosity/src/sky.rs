@@ -46,46 +46,27 @@ const SEED: u64 = 0x5c1e_5c1e;
 /// zeros, when `progress` asks to.
 pub fn exposure(mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, axis: usize, progress: &dyn Progress) -> (Vec<f64>, u64) {
     let axis = axis.max(1);
-    let n = mesh.len();
-    const CHUNK: usize = 1024;
-    progress.begin("sky exposure", n as u64);
-    let mut s = vec![0.0; n];
-    let cast: u64 = s
-        .par_chunks_mut(CHUNK)
-        .enumerate()
-        .map(|(c, out)| {
-            if progress.should_stop() {
-                return 0;
+    let mut s = vec![0.0; mesh.len()];
+    let cast = crate::progress::for_each_chunked(&mut s, "sky exposure", progress, Vec::new, |e, s, dirs| {
+        let el = &mesh.elements[e];
+        if receivers.open_cells.get(e).copied().unwrap_or(u64::MAX) == 0 {
+            return 0;
+        }
+        let mut rng = rng_for(SEED, e as u64);
+        stratified(axis, &mut rng, dirs);
+        let (t, b) = basis(el.normal);
+        let mut seen = 0usize;
+        for &(u1, u2) in dirs.iter() {
+            let p = open_point(mesh, receivers, e, &mut rng);
+            let d = cosine_hemisphere(u1, u2);
+            let dir = t * d.x + b * d.y + el.normal * d.z;
+            if rays.escapes(p.as_vec3(), dir.as_vec3(), Some(el.patch)) {
+                seen += 1;
             }
-            let mut dirs = Vec::new();
-            let mut cast = 0u64;
-            for (k, s) in out.iter_mut().enumerate() {
-                let e = c * CHUNK + k;
-                let el = &mesh.elements[e];
-                let open = receivers.open_cells.get(e).copied().unwrap_or(u64::MAX);
-                if open == 0 {
-                    continue;
-                }
-                let mut rng = rng_for(SEED, e as u64);
-                stratified(axis, &mut rng, &mut dirs);
-                let (t, b) = basis(el.normal);
-                let mut seen = 0usize;
-                for &(u1, u2) in &dirs {
-                    let p = open_point(mesh, receivers, e, &mut rng);
-                    let d = cosine_hemisphere(u1, u2);
-                    let dir = t * d.x + b * d.y + el.normal * d.z;
-                    if rays.escapes(p.as_vec3(), dir.as_vec3(), Some(el.patch)) {
-                        seen += 1;
-                    }
-                }
-                cast += dirs.len() as u64;
-                *s = seen as f64 / dirs.len() as f64;
-            }
-            progress.advance(out.len() as u64);
-            cast
-        })
-        .sum();
-    progress.end();
+        }
+        *s = seen as f64 / dirs.len() as f64;
+        dirs.len() as u64
+    });
     (s, cast)
 }
 

@@ -136,6 +136,21 @@ enum Radiance {
     Rgb([f64; 3]),
 }
 
+impl Radiance {
+    /// The value as RGB, finite and non-negative, else an error at its span saying
+    /// "`what` [..] must be finite and non-negative".
+    fn checked(r: &Spanned<Radiance>, at: &dyn Fn(std::ops::Range<usize>) -> Location, what: &str) -> Result<Rgb> {
+        let v = match r.get_ref() {
+            Radiance::Grey(g) => [*g; 3],
+            Radiance::Rgb(c) => *c,
+        };
+        if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
+            return Err(Error::input(at(r.span()), format!("{what} {v:?} must be finite and non-negative")));
+        }
+        Ok(Rgb::from_array(v))
+    }
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct MaterialToml {
@@ -284,16 +299,7 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
 
     // Material overrides.
     if let Some(sky) = &spec.sky {
-        let rgb = |r: &Spanned<Radiance>, what: &str| -> Result<Rgb> {
-            let v = match r.get_ref() {
-                Radiance::Grey(g) => [*g; 3],
-                Radiance::Rgb(c) => *c,
-            };
-            if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
-                return Err(Error::input(at(r.span()), format!("[sky]: {what} {v:?} must be finite and non-negative")));
-            }
-            Ok(Rgb::from_array(v))
-        };
+        let rgb = |r: &Spanned<Radiance>, what: &str| Radiance::checked(r, &at, &format!("[sky]: {what}"));
         let radiance = match &sky.get_ref().radiance {
             Some(r) => rgb(r, "radiance")?,
             None => Rgb::ZERO,
@@ -441,16 +447,8 @@ fn add_light(desc: &mut SceneDesc, k: usize, l: &Spanned<LightToml>, at: &dyn Fn
         }
         Ok(d)
     };
-    let rgb = |r: &Option<Spanned<Radiance>>, what: &str| -> Result<Rgb> {
-        let r = r.as_ref().expect("checked above");
-        let v = match r.get_ref() {
-            Radiance::Grey(g) => [*g; 3],
-            Radiance::Rgb(c) => *c,
-        };
-        if v.iter().any(|c| !c.is_finite() || *c < 0.0) {
-            return Err(Error::input(at(r.span()), format!("[[lights]] '{name}': {what} {v:?} must be finite and non-negative")));
-        }
-        Ok(Rgb::from_array(v))
+    let rgb = |r: &Option<Spanned<Radiance>>, what: &str| {
+        Radiance::checked(r.as_ref().expect("checked above"), at, &format!("[[lights]] '{name}': {what}"))
     };
     let cone = |c: &Option<Spanned<f64>>, default: f64| -> Result<f64> {
         match c {
