@@ -209,8 +209,11 @@ impl Atlas {
                     .zip(r.iter().zip(at))
                     .map(|((g, (u, v, lo, _)), ((w, h), (x, y)))| Chart {
                         polygons: g.clone(),
-                        origin: *u * lo.0 + *v * lo.1 + scene.polygons[g[0] as usize].normal
-                            * scene.polygons[g[0] as usize].normal.dot(scene.polygons[g[0] as usize].vertices[0]),
+                        // The plane's point at (u, v) = lo: u, v and the normal are orthonormal.
+                        origin: *u * lo.0 + *v * lo.1 + {
+                            let p = &scene.polygons[g[0] as usize];
+                            p.normal * p.normal.dot(p.vertices[0])
+                        },
                         u: *u,
                         v: *v,
                         width: *w,

@@ -109,45 +109,28 @@ struct Buffer {
 }
 
 impl Buffer {
-    fn push_f32x3(&mut self, data: &[[f32; 3]], target: json::buffer::Target, min_max: bool) -> json::Index<json::Accessor> {
+    /// Vertex data of `N` floats per vertex (`type_` VEC2 or VEC3), with its min and max
+    /// when asked (POSITION must have them).
+    fn push_f32<const N: usize>(&mut self, data: &[[f32; N]], type_: json::accessor::Type, min_max: bool) -> json::Index<json::Accessor> {
         let offset = self.bytes.len();
-        for v in data {
-            for x in v {
-                self.bytes.extend(x.to_le_bytes());
-            }
+        for x in data.iter().flatten() {
+            self.bytes.extend(x.to_le_bytes());
         }
         let (min, max) = if min_max {
-            let mut lo = [f32::INFINITY; 3];
-            let mut hi = [f32::NEG_INFINITY; 3];
+            let mut lo = [f32::INFINITY; N];
+            let mut hi = [f32::NEG_INFINITY; N];
             for v in data {
-                for k in 0..3 {
+                for k in 0..N {
                     lo[k] = lo[k].min(v[k]);
                     hi[k] = hi[k].max(v[k]);
                 }
             }
-            (Some(json::serialize::to_value(lo).unwrap()), Some(json::serialize::to_value(hi).unwrap()))
+            (Some(json::serialize::to_value(lo.to_vec()).unwrap()), Some(json::serialize::to_value(hi.to_vec()).unwrap()))
         } else {
             (None, None)
         };
-        self.view_and_accessor(offset, data.len(), target, json::accessor::ComponentType::F32, json::accessor::Type::Vec3, min, max)
-    }
-
-    fn push_f32x2(&mut self, data: &[[f32; 2]]) -> json::Index<json::Accessor> {
-        let offset = self.bytes.len();
-        for v in data {
-            for x in v {
-                self.bytes.extend(x.to_le_bytes());
-            }
-        }
-        self.view_and_accessor(
-            offset,
-            data.len(),
-            json::buffer::Target::ArrayBuffer,
-            json::accessor::ComponentType::F32,
-            json::accessor::Type::Vec2,
-            None,
-            None,
-        )
+        let target = json::buffer::Target::ArrayBuffer;
+        self.view_and_accessor(offset, data.len(), target, json::accessor::ComponentType::F32, type_, min, max)
     }
 
     fn push_u32(&mut self, data: &[u32]) -> json::Index<json::Accessor> {
@@ -413,9 +396,10 @@ pub fn baked_glb(
                 l.min(Rgb::ONE).as_vec3().to_array()
             })
             .collect();
-        let a_pos = buf.push_f32x3(&pos, json::buffer::Target::ArrayBuffer, true);
-        let a_nor = buf.push_f32x3(&nor, json::buffer::Target::ArrayBuffer, false);
-        let a_col = buf.push_f32x3(&col, json::buffer::Target::ArrayBuffer, false);
+        let vec3 = json::accessor::Type::Vec3;
+        let a_pos = buf.push_f32(&pos, vec3, true);
+        let a_nor = buf.push_f32(&nor, vec3, false);
+        let a_col = buf.push_f32(&col, vec3, false);
         let a_idx = buf.push_u32(&part.indices);
         // TEXCOORD_0: each chart's own planar coordinates in scene units (a texture space
         // with no seams inside a chart); TEXCOORD_1: the lightmap atlas.
@@ -432,7 +416,8 @@ pub fn baked_glb(
                     ([d.dot(c.u) as f32, d.dot(c.v) as f32], [u as f32, w as f32])
                 })
                 .unzip();
-            (buf.push_f32x2(&uv0), buf.push_f32x2(&uv1))
+            let vec2 = json::accessor::Type::Vec2;
+            (buf.push_f32(&uv0, vec2, false), buf.push_f32(&uv1, vec2, false))
         });
         stats.vertices += pos.len();
         stats.triangles += part.indices.len() / 3;

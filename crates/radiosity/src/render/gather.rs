@@ -220,7 +220,7 @@ impl<'a> Shader<'a> {
             nrays += r;
         }
         let g2 = self.gather_axis * self.gather_axis;
-        let dirs = &pat.gather[(k * g2).min(pat.gather.len())..((k + 1) * g2).min(pat.gather.len())];
+        let dirs = &pat.gather[k * g2..(k + 1) * g2];
         nrays += g2 as u64;
         let hi = match self.indirect {
             Indirect::Interpolated(hv) if g2 > 0 => {
