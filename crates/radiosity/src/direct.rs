@@ -22,10 +22,25 @@ use crate::Rgb;
 pub struct Emitter {
     /// Scene polygon index.
     pub polygon: u32,
-    /// Emitted exitance E = π·L_e.
+    /// Emitted exitance E = π·L_e (with an emission texture: its mean).
     pub exitance: Rgb,
+    /// True if an emission texture varies its exitance: shadow rays then weigh each point
+    /// by its own exitance.
+    pub textured: bool,
     /// Cumulative fan-triangle areas (for uniform sampling).
     cdf: Vec<f64>,
+}
+
+impl Emitter {
+    /// Emitted exitance at point `y` of the emitter.
+    #[inline]
+    pub fn exitance_at(&self, scene: &Scene, y: DVec3) -> Rgb {
+        if self.textured {
+            scene.emission_at(self.polygon as usize, y, 0.0) * std::f64::consts::PI
+        } else {
+            self.exitance
+        }
+    }
 }
 
 /// The emitting polygons of a scene.
@@ -46,7 +61,7 @@ pub fn emitters(scene: &Scene) -> Vec<Emitter> {
                 acc += 0.5 * (v[k] - v[0]).cross(v[k + 1] - v[0]).length();
                 cdf.push(acc);
             }
-            Some(Emitter { polygon: i as u32, exitance: m.exitance(), cdf })
+            Some(Emitter { polygon: i as u32, exitance: m.exitance(), textured: m.emission_texture.is_some(), cdf })
         })
         .collect()
 }
@@ -91,7 +106,7 @@ pub fn direct_irradiance<'s>(
         if f <= 0.0 {
             continue;
         }
-        let mut seen = 0u32;
+        let mut seen = Rgb::ZERO;
         let mut tried = 0u32;
         for &(a, b) in samples(k) {
             let y = sample_polygon(&q.vertices, &em.cdf, a, b);
@@ -100,12 +115,11 @@ pub fn direct_irradiance<'s>(
             }
             tried += 1;
             if rays.visible(x, own, y, em.polygon) {
-                seen += 1;
+                seen += em.exitance_at(scene, y);
             }
         }
         nrays += tried as u64;
-        let vis = if tried == 0 { 1.0 } else { seen as f64 / tried as f64 };
-        h += em.exitance * (f * vis);
+        h += if tried == 0 { em.exitance * f } else { seen * (f / tried as f64) };
     }
     (h, nrays)
 }
@@ -168,7 +182,7 @@ pub fn direct_irradiance_sampled(
         };
         if visible {
             // f·E / p with p = w / total.
-            h += em.exitance * (f * total / w);
+            h += em.exitance_at(scene, y) * (f * total / w);
         }
     }
     (h / samples.len() as f64, nrays)

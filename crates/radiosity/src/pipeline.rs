@@ -101,13 +101,21 @@ pub struct Solved {
 /// (see [`solve::solve_observed`]); the program draws the frames of `render --frames`.
 pub type FrameObserver<'a> = dyn FnMut(&Scene, &Mesh, &IterationState<'_>) + 'a;
 
-/// Per-element reflectance and emitted exitance.
+/// Per-element reflectance and emitted exitance: the material's, or with a texture its
+/// mean over the element's footprint times the factor ([`Scene::surface_means`]).
 pub fn element_materials(scene: &Scene, mesh: &Mesh) -> (Vec<Rgb>, Vec<Rgb>) {
+    use rayon::prelude::*;
     mesh.elements
-        .iter()
+        .par_iter()
         .map(|e| {
             let m = &scene.materials[scene.polygons[e.patch as usize].material as usize];
-            (m.reflectance, m.exitance())
+            if m.is_textured() {
+                let (corners, n) = e.corners(&mesh.positions);
+                let (rho, le) = scene.surface_means(e.patch as usize, &corners[..n]);
+                (rho, le * std::f64::consts::PI)
+            } else {
+                (m.reflectance, m.exitance())
+            }
         })
         .unzip()
 }

@@ -369,7 +369,7 @@ fn huge_emission_or_coordinates_are_refused_naming_the_line() {
         name: "t".into(),
         materials: vec![scene::MaterialDesc::diffuse("m", radiosity::Rgb::splat(0.5))],
         objects: vec![scene::ObjectDesc { name: "o".into(), loc: None }],
-        polygons: vec![scene::PolygonDesc { vertices: tri, material: 0, object: 0, loc: Some(radiosity::Location::line("t.obj", 4)) }],
+        polygons: vec![scene::PolygonDesc { uvs: Vec::new(), vertices: tri, material: 0, object: 0, loc: Some(radiosity::Location::line("t.obj", 4)) }],
         ..Default::default()
     };
     let e = Scene::from_desc(d.clone()).unwrap_err().to_string();

@@ -28,7 +28,7 @@ pub fn furnace_with(name: &str, clutter: Vec<Vec<Vec<DVec3>>>) -> Scene {
     for (k, polys) in objects.into_iter().enumerate() {
         d.objects.push(ObjectDesc { name: format!("o{k}"), loc: None });
         for p in polys {
-            d.polygons.push(PolygonDesc { vertices: p, material: 0, object: k as u32, loc: None });
+            d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: p, material: 0, object: k as u32, loc: None });
         }
     }
     Scene::from_desc(d).unwrap()

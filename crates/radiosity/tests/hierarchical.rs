@@ -32,7 +32,7 @@ fn furnace_with(objects: Vec<Vec<Vec<DVec3>>>) -> Scene {
     for (k, polys) in all.into_iter().enumerate() {
         d.objects.push(ObjectDesc { name: format!("o{k}"), loc: None });
         for p in polys {
-            d.polygons.push(PolygonDesc { vertices: p, material: (k > 0) as u32, object: k as u32, loc: None });
+            d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: p, material: (k > 0) as u32, object: k as u32, loc: None });
         }
     }
     Scene::from_desc(d).unwrap()
@@ -161,7 +161,7 @@ fn links_are_refined_under_a_shadow_boundary() {
     let polys = [(quad(0.0, 0.0, 1.0, true), 0), (quad(0.5, 0.3, 0.55, true), 0), (quad(0.5, 0.3, 0.55, false), 0), (quad(1.0, 0.4, 0.6, false), 1)];
     for (k, (p, m)) in polys.into_iter().enumerate() {
         d.objects.push(ObjectDesc { name: format!("o{k}"), loc: None });
-        d.polygons.push(PolygonDesc { vertices: p, material: m, object: k as u32, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: p, material: m, object: k as u32, loc: None });
     }
     let scene = Scene::from_desc(d).unwrap();
     let size = Some(0.04);

@@ -38,10 +38,10 @@ fn floor_scene(occluder: Option<f64>, lights: Vec<Light>) -> Scene {
         vec![DVec3::new(-a, y, -a), DVec3::new(-a, y, a), DVec3::new(a, y, a), DVec3::new(a, y, -a)]
     };
     d.objects.push(ObjectDesc { name: "floor".into(), loc: None });
-    d.polygons.push(PolygonDesc { vertices: quad(0.0, 2.0), material: 0, object: 0, loc: None });
+    d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: quad(0.0, 2.0), material: 0, object: 0, loc: None });
     if let Some(y) = occluder {
         d.objects.push(ObjectDesc { name: "occluder".into(), loc: None });
-        d.polygons.push(PolygonDesc { vertices: quad(y, 0.25), material: 1, object: 1, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: quad(y, 0.25), material: 1, object: 1, loc: None });
     }
     Scene::from_desc(d).unwrap()
 }
@@ -226,7 +226,7 @@ fn closed_room(light: Light) -> Scene {
     d.materials.push(MaterialDesc::diffuse("wall", Rgb::splat(RHO)));
     for (k, f) in common::box_faces(DVec3::ZERO, DVec3::ONE, true).into_iter().enumerate() {
         d.objects.push(ObjectDesc { name: format!("wall{k}"), loc: None });
-        d.polygons.push(PolygonDesc { vertices: f, material: 0, object: k as u32, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material: 0, object: k as u32, loc: None });
     }
     Scene::from_desc(d).unwrap()
 }
@@ -288,7 +288,7 @@ fn a_directional_light_is_a_sun_of_no_size() {
     d.polygons = f
         .polygons
         .iter()
-        .map(|p| PolygonDesc { vertices: p.vertices.clone(), material: p.material, object: p.object, loc: None })
+        .map(|p| PolygonDesc { uvs: Vec::new(), vertices: p.vertices.clone(), material: p.material, object: p.object, loc: None })
         .collect();
     d.sky = Some(Sky { radiance: Rgb::ZERO, sun: Some(Sun { direction: -travel, irradiance: Rgb::splat(3.0), angular_diameter_deg: 0.0 }) });
     let b = solve_scene(Scene::from_desc(d).unwrap(), &s, &NoProgress).unwrap();
@@ -360,7 +360,7 @@ fn a_light_inside_a_block_is_reported() {
         d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(RHO)));
         d.objects.push(ObjectDesc { name: "floor".into(), loc: None });
         let a = 2.0;
-        d.polygons.push(PolygonDesc {
+        d.polygons.push(PolygonDesc { uvs: Vec::new(),
             vertices: vec![DVec3::new(-a, 0.0, -a), DVec3::new(-a, 0.0, a), DVec3::new(a, 0.0, a), DVec3::new(a, 0.0, -a)],
             material: 0,
             object: 0,
@@ -370,7 +370,7 @@ fn a_light_inside_a_block_is_reported() {
         let faces = common::box_faces(DVec3::new(-0.3, 0.0, -0.3), DVec3::new(0.3, 0.4, 0.3), false);
         for (k, f) in faces.into_iter().enumerate().filter(|(k, _)| *k != 2) {
             let _ = k;
-            d.polygons.push(PolygonDesc { vertices: f, material: 0, object: 1, loc: None });
+            d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material: 0, object: 1, loc: None });
         }
         solve_scene(Scene::from_desc(d).unwrap(), &Settings { mesh_size: Some(0.2), ..Default::default() }, &NoProgress).unwrap()
     };

@@ -52,7 +52,7 @@ fn open_box(h: f64, wall_rho: f64, lid: Option<f64>, sky: Option<f64>) -> Scene 
         d.objects.push(ObjectDesc { name: name.into(), loc: None });
         let object = d.objects.len() as u32 - 1;
         let _ = k;
-        d.polygons.push(PolygonDesc { vertices: f, material, object, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material, object, loc: None });
     }
     d.sky = sky.map(|l| Sky { radiance: Rgb::splat(l), sun: None });
     Scene::from_desc(d).unwrap()
@@ -127,13 +127,13 @@ fn no_sky_light_enters_a_closed_room() {
     d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
     d.objects.push(ObjectDesc { name: "room".into(), loc: None });
     for f in common::box_faces(DVec3::ZERO, DVec3::ONE, true) {
-        d.polygons.push(PolygonDesc { vertices: f, material: 0, object: 0, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material: 0, object: 0, loc: None });
     }
     // A box inside, two-sided, so rays also start from surfaces facing every way.
     d.objects.push(ObjectDesc { name: "box".into(), loc: None });
     d.materials.push(MaterialDesc { two_sided: Some(true), ..MaterialDesc::diffuse("box", Rgb::splat(0.5)) });
     for f in common::box_faces(DVec3::splat(0.3), DVec3::splat(0.6), false) {
-        d.polygons.push(PolygonDesc { vertices: f, material: 1, object: 1, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material: 1, object: 1, loc: None });
     }
     d.sky = Some(Sky { radiance: Rgb::ONE, sun: None });
     let scene = Scene::from_desc(d).unwrap();
@@ -150,7 +150,7 @@ fn final_gather_shows_the_sky_and_a_plate_lit_by_it_exactly() {
     d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
     d.objects.push(ObjectDesc { name: "plate".into(), loc: None });
     let v = vec![DVec3::new(0., 0., 0.), DVec3::new(0., 0., 1.), DVec3::new(1., 0., 1.), DVec3::new(1., 0., 0.)];
-    d.polygons.push(PolygonDesc { vertices: v, material: 0, object: 0, loc: None });
+    d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: v, material: 0, object: 0, loc: None });
     d.sky = Some(Sky { radiance: Rgb::splat(l_sky), sun: None });
     let scene = Scene::from_desc(d).unwrap();
     let solved = solve_scene(scene, &Settings { mesh_size: Some(0.1), ..Default::default() }, &NoProgress).unwrap();
@@ -203,12 +203,12 @@ fn closed_two_sided_room_leak(cluster_receivers: bool) -> (f64, f64, usize) {
     // The outer shell faces out, the inner one faces in.
     for (lo, hi, inward) in [(DVec3::splat(-0.05), DVec3::splat(1.05), false), (DVec3::ZERO, DVec3::ONE, true)] {
         for f in common::box_faces(lo, hi, inward) {
-            d.polygons.push(PolygonDesc { vertices: f, material: 0, object: 0, loc: None });
+            d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material: 0, object: 0, loc: None });
         }
     }
     d.objects.push(ObjectDesc { name: "table".into(), loc: None });
     for f in common::box_faces(DVec3::new(0.3, 0.0, 0.3), DVec3::new(0.7, 0.4, 0.7), false) {
-        d.polygons.push(PolygonDesc { vertices: f, material: 0, object: 1, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material: 0, object: 1, loc: None });
     }
     d.sky = Some(Sky { radiance: Rgb::ONE, sun: None });
     let scene = Scene::from_desc(d).unwrap();
@@ -284,13 +284,13 @@ fn sun_scene(direction: DVec3, with_roof: bool) -> Scene {
     d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
     d.objects.push(ObjectDesc { name: "floor".into(), loc: None });
     let floor = vec![DVec3::new(0., 0., 0.), DVec3::new(0., 0., 2.), DVec3::new(2., 0., 2.), DVec3::new(2., 0., 0.)];
-    d.polygons.push(PolygonDesc { vertices: floor, material: 0, object: 0, loc: None });
+    d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: floor, material: 0, object: 0, loc: None });
     if with_roof {
         // A one-sided square 0.5 on a side at height 1 over the floor's centre, facing up.
         d.objects.push(ObjectDesc { name: "roof".into(), loc: None });
         let roof =
             vec![DVec3::new(0.75, 1., 0.75), DVec3::new(0.75, 1., 1.25), DVec3::new(1.25, 1., 1.25), DVec3::new(1.25, 1., 0.75)];
-        d.polygons.push(PolygonDesc { vertices: roof, material: 0, object: 1, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: roof, material: 0, object: 1, loc: None });
     }
     let sun = radiosity::scene::Sun { direction, irradiance: Rgb::splat(100.0), angular_diameter_deg: 0.53 };
     d.sky = Some(Sky { radiance: Rgb::ZERO, sun: Some(sun) });

@@ -201,7 +201,7 @@ fn closed_cornell_box_rows_close() {
     let mut d = radiosity::scene::builtin::cornell();
     d.objects.push(radiosity::scene::ObjectDesc { name: "front".into(), loc: None });
     let white = d.materials.iter().position(|m| m.name == "white").unwrap() as u32;
-    d.polygons.push(radiosity::scene::PolygonDesc {
+    d.polygons.push(radiosity::scene::PolygonDesc { uvs: Vec::new(),
         vertices: vec![DVec3::new(0., 0., 0.), DVec3::new(552.8, 0., 0.), DVec3::new(556., 548.8, 0.), DVec3::new(0., 548.8, 0.)],
         material: white,
         object: d.objects.len() as u32 - 1,

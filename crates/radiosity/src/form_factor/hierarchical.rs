@@ -1345,7 +1345,7 @@ mod tests {
         d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
         for (k, v) in [a, b].into_iter().enumerate() {
             d.objects.push(ObjectDesc { name: format!("o{k}"), loc: None });
-            d.polygons.push(PolygonDesc { vertices: v.to_vec(), material: 0, object: k as u32, loc: None });
+            d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: v.to_vec(), material: 0, object: k as u32, loc: None });
         }
         let scene = Scene::from_desc(d).unwrap();
         let mesh = crate::mesh::mesh_uniform(&scene, size);

@@ -748,7 +748,15 @@ pub fn a_posteriori_errors(scene: &Scene, mesh: &Mesh, indirect: &[Rgb], radiosi
     let rho: Vec<Rgb> = mesh
         .elements
         .iter()
-        .map(|e| scene.materials[scene.polygons[e.patch as usize].material as usize].reflectance)
+        .map(|e| {
+            let m = &scene.materials[scene.polygons[e.patch as usize].material as usize];
+            if m.base_texture.is_some() {
+                let (c, n) = e.corners(&mesh.positions);
+                scene.surface_means(e.patch as usize, &c[..n]).0
+            } else {
+                m.reflectance
+            }
+        })
         .collect();
     let reflected: Vec<Rgb> = indirect.iter().zip(&rho).map(|(h, r)| *h * *r).collect();
     let vertex = crate::reconstruct::vertex_radiosity(scene, mesh, &reflected);
@@ -906,8 +914,8 @@ mod tests {
             materials: vec![MaterialDesc::diffuse("grey", Rgb::splat(0.5))],
             objects: vec![ObjectDesc { name: "a".into(), loc: None }, ObjectDesc { name: "b".into(), loc: None }],
             polygons: vec![
-                PolygonDesc { vertices: vec![v(0., 0.), v(0., 1.), v(1., 1.), v(1., 0.)], material: 0, object: 0, loc: None },
-                PolygonDesc { vertices: vec![v(1., 0.), v(1., 1.), v(2., 1.), v(2., 0.)], material: 0, object: 1, loc: None },
+                PolygonDesc { uvs: Vec::new(), vertices: vec![v(0., 0.), v(0., 1.), v(1., 1.), v(1., 0.)], material: 0, object: 0, loc: None },
+                PolygonDesc { uvs: Vec::new(), vertices: vec![v(1., 0.), v(1., 1.), v(2., 1.), v(2., 0.)], material: 0, object: 1, loc: None },
             ],
             ..Default::default()
         };

@@ -403,7 +403,7 @@ mod tests {
         let desc = SceneDesc {
             materials: vec![MaterialDesc::diffuse("grey", crate::Rgb::splat(0.5))],
             objects: vec![ObjectDesc { name: "disk".into(), loc: None }],
-            polygons: vec![PolygonDesc { vertices: disk, material: 0, object: 0, loc: None }],
+            polygons: vec![PolygonDesc { uvs: Vec::new(), vertices: disk, material: 0, object: 0, loc: None }],
             ..Default::default()
         };
         let scene = Scene::from_desc(desc).unwrap();
@@ -451,7 +451,7 @@ mod tests {
             let desc = SceneDesc {
                 materials: vec![MaterialDesc::diffuse("grey", crate::Rgb::splat(0.5))],
                 objects: vec![ObjectDesc { name: "p".into(), loc: None }],
-                polygons: vec![PolygonDesc { vertices: poly, material: 0, object: 0, loc: None }],
+                polygons: vec![PolygonDesc { uvs: Vec::new(), vertices: poly, material: 0, object: 0, loc: None }],
                 ..Default::default()
             };
             let Ok(scene) = Scene::from_desc(desc) else { continue };

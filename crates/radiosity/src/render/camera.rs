@@ -45,6 +45,11 @@ impl PinholeCamera {
         self.forward + self.right * sx + self.up * sy
     }
 
+    /// Angle a pixel spans at the image's centre, radians (small-angle).
+    pub fn pixel_angle(&self) -> f64 {
+        2.0 * self.tan_half / self.height
+    }
+
     /// The camera frame (right, up, forward), orthonormal.
     pub fn frame(&self) -> (DVec3, DVec3, DVec3) {
         (self.right, self.up, self.forward)

@@ -188,14 +188,15 @@ impl<'a> Shader<'a> {
     }
 
     /// Outgoing radiance at `p` on the front of element `e`, with the `k`-th position's
-    /// share of `pat`. Returns the radiance and the rays cast.
-    pub fn shade(&self, e: u32, p: glam::DVec3, k: usize, pat: &mut Patterns) -> (Rgb, u64) {
+    /// share of `pat`; textures are read filtered over `footprint` (the area, in scene
+    /// units², that the sample stands for). Returns the radiance and the rays cast.
+    pub fn shade(&self, e: u32, p: glam::DVec3, k: usize, footprint: f64, pat: &mut Patterns) -> (Rgb, u64) {
         let (scene, mesh, rays) = (self.scene, self.mesh, self.rays);
         let el = &mesh.elements[e as usize];
-        let poly = &scene.polygons[el.patch as usize];
-        let mat = &scene.materials[poly.material as usize];
-        let mut l = mat.emission;
-        if mat.reflectance.max_element() <= 0.0 {
+        let patch = el.patch as usize;
+        let mut l = scene.emission_at(patch, p, footprint);
+        let rho = scene.reflectance_at(patch, p, footprint);
+        if rho.max_element() <= 0.0 {
             return (l, 0);
         }
         let m2 = self.shadow_axis * self.shadow_axis;
@@ -231,7 +232,7 @@ impl<'a> Shader<'a> {
                 gathered(mesh, rays, Some((locator, reflected)), self.sky_h, p, el.normal, el.patch, dirs)
             }
         };
-        l += mat.reflectance * (hd + hi) * (1.0 / std::f64::consts::PI);
+        l += rho * (hd + hi) * (1.0 / std::f64::consts::PI);
         (l, nrays)
     }
 }
@@ -253,6 +254,7 @@ pub fn render(
     let s = opts.spp_axis.max(1);
     let inv_spp = 1.0 / (s * s) as f64;
     let shader = Shader::new(scene, mesh, rays, indirect, opts);
+    let pixel_angle = cam.pixel_angle() / s as f64;
     progress.begin("final gather", h as u64);
     let stopped = AtomicBool::new(false);
     let mut img = Image::new(w, h);
@@ -283,7 +285,11 @@ pub fn render(
                     if mesh.elements[e as usize].normal.dot(dir) >= 0.0 {
                         continue; // back side of a one-sided surface
                     }
-                    let (l, r) = shader.shade(e, p, k, &mut pat);
+                    // The sub-pixel's footprint on the surface, for texture filtering.
+                    let cos = mesh.elements[e as usize].normal.dot(dir).abs() / dir.length();
+                    let r_angle = (p - cam.eye).length() * pixel_angle;
+                    let footprint = r_angle * r_angle / cos.max(0.05);
+                    let (l, r) = shader.shade(e, p, k, footprint, &mut pat);
                     acc += l;
                     nrays += r;
                 }

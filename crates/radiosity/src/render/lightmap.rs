@@ -118,7 +118,7 @@ pub fn render(
                 let p = atlas.world(c, x as f64 + 0.5, y as f64 + 0.5);
                 let mut rng = rng_for(opts.seed, (y * n + x) as u64);
                 shader.draw(1, &mut rng, &mut pat);
-                let (l, r) = shader.shade(e, p, 0, &mut pat);
+                let (l, r) = shader.shade(e, p, 0, atlas.texel * atlas.texel, &mut pat);
                 *px = l;
                 cast += r + 1;
             }

@@ -58,6 +58,8 @@ pub fn furnace(reflectance: f64, radiance: f64) -> SceneDesc {
     ];
     let mut d = SceneDesc { name: "furnace".into(), ..Default::default() };
     d.materials.push(MaterialDesc {
+        base_texture: None,
+        emission_texture: None,
         name: "furnace".into(),
         reflectance: Rgb::splat(reflectance),
         emission: Rgb::splat(radiance),
@@ -73,7 +75,7 @@ pub fn furnace(reflectance: f64, radiance: f64) -> SceneDesc {
             v.reverse();
         }
         d.objects.push(ObjectDesc { name: (*name).into(), loc: None });
-        d.polygons.push(PolygonDesc { vertices: v, material: 0, object: i as u32, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: v, material: 0, object: i as u32, loc: None });
     }
     d.camera = Some(Camera { position: c(0.5, 0.5, 0.05), look_at: c(0.5, 0.5, 1.0), up: DVec3::Y, vfov_deg: 60.0 });
     d

@@ -23,9 +23,14 @@
 //! which a radiosity solver cannot use (a surface that reflects everything never absorbs,
 //! and the solution diverges in a closed room): a material that omits it, and a primitive
 //! without a material, get reflectance [`DEFAULT_REFLECTANCE`] (0.8, Blender's default base
-//! colour) and a [`Warning`] naming the material. Metallic/roughness, alpha, textures
-//! (including `baseColorTexture` and `emissiveTexture`), normals and vertex colours are
-//! ignored: the solver needs one constant colour per material.
+//! colour) and a [`Warning`] naming the material — unless it has a `baseColorTexture`, whose
+//! factor defaults to 1.0 as glTF says. **Textures**: `baseColorTexture` and
+//! `emissiveTexture` (PNG or JPEG images, by `uri` — relative file or base64 `data:` — or
+//! `bufferView`) multiply the factors, read through `TEXCOORD_n` (`texCoord`, or
+//! `KHR_texture_transform`'s override), the transform and the sampler's wrap modes (see
+//! [`super::texture`]); a texture whose only source is an extension's (WebP, KTX2) is
+//! ignored with a warning, an image that cannot be read or decoded is an error. Metallic/
+//! roughness, alpha, normal maps and vertex colours are ignored.
 //!
 //! **Lights.** `KHR_lights_punctual` point, spot and directional lights become
 //! [`super::Light`]s at their nodes' world positions, pointing along the node's −Z (scale
@@ -52,7 +57,7 @@ use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
-use glam::{DMat4, DQuat, DVec3};
+use glam::{DMat4, DQuat, DVec2, DVec3};
 use gltf::json::{
     self,
     accessor::{ComponentType, Type},
@@ -71,7 +76,7 @@ pub const DEFAULT_REFLECTANCE: f64 = 0.8;
 const MAX_ZERO_ACCESSOR: usize = 1 << 22;
 
 /// Required extensions we can read.
-const SUPPORTED_REQUIRED: [&str; 2] = ["KHR_materials_emissive_strength", "KHR_mesh_quantization"];
+const SUPPORTED_REQUIRED: [&str; 3] = ["KHR_materials_emissive_strength", "KHR_mesh_quantization", "KHR_texture_transform"];
 
 /// Required extensions that only change looks we ignore anyway (textures, shading).
 fn ignorable_extension(name: &str) -> bool {
@@ -191,6 +196,8 @@ pub fn parse_gltf(
         load_file,
         warnings: Vec::new(),
         cur_mesh: 0,
+        textures: Vec::new(),
+        image_texture: HashMap::new(),
     };
     reader.read()
 }
@@ -308,7 +315,15 @@ impl JsonLines {
 
 /// Triangles of one mesh in its own frame, with the glTF material index of each.
 struct MeshTris {
-    tris: Vec<([DVec3; 3], Option<usize>)>,
+    tris: Vec<Tri>,
+}
+
+/// One triangle: positions, glTF material, texture coordinates per set (those the
+/// material's textures use; empty without).
+struct Tri {
+    p: [DVec3; 3],
+    material: Option<usize>,
+    uv: Vec<[DVec2; 3]>,
 }
 
 /// One node that draws a mesh.
@@ -329,6 +344,9 @@ struct Reader<'a, F> {
     warnings: Vec<Warning>,
     /// The mesh being read (for the location of its errors).
     cur_mesh: usize,
+    /// Decoded textures, and the texture each glTF image became.
+    textures: Vec<std::sync::Arc<super::Texture>>,
+    image_texture: HashMap<usize, u32>,
 }
 
 fn name_or(name: &Option<String>, fallback: impl FnOnce() -> String) -> String {
@@ -396,7 +414,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
         }
 
         // Materials used, in file order; then the default material if a primitive has none.
-        let mut used: Vec<usize> = meshes.values().flat_map(|m| m.tris.iter().filter_map(|t| t.1)).collect();
+        let mut used: Vec<usize> = meshes.values().flat_map(|m| m.tris.iter().filter_map(|t| t.material)).collect();
         used.sort_unstable();
         used.dedup();
         let mut desc = SceneDesc {
@@ -405,11 +423,11 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
         };
         let mut mat_map: HashMap<usize, u32> = HashMap::new();
         for &mi in &used {
-            let m = self.material(mi);
+            let m = self.material(mi)?;
             mat_map.insert(mi, desc.materials.len() as u32);
             desc.materials.push(m);
         }
-        let needs_default = meshes.values().any(|m| m.tris.iter().any(|t| t.1.is_none()));
+        let needs_default = meshes.values().any(|m| m.tris.iter().any(|t| t.material.is_none()));
         let default_mat = if needs_default {
             self.warn(
                 Location::file(self.file),
@@ -430,8 +448,8 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             desc.objects.push(ObjectDesc { name, loc: Some(self.at("nodes", inst.node)) });
             let flip = inst.world.determinant() < 0.0;
             let mesh_loc = self.at("meshes", inst.mesh);
-            for (tri, mat) in &meshes[&inst.mesh].tris {
-                let mut v: Vec<DVec3> = tri.iter().map(|p| inst.world.transform_point3(*p)).collect();
+            for tri in &meshes[&inst.mesh].tris {
+                let mut v: Vec<DVec3> = tri.p.iter().map(|p| inst.world.transform_point3(*p)).collect();
                 if v.iter().any(|p| !p.is_finite()) {
                     return Err(self.err(
                         "nodes",
@@ -443,14 +461,16 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
                         ),
                     ));
                 }
+                let mut uvs: Vec<Vec<DVec2>> = tri.uv.iter().map(|t| t.to_vec()).collect();
                 if flip {
                     v.reverse();
+                    uvs.iter_mut().for_each(|t| t.reverse());
                 }
-                let material = match mat {
-                    Some(m) => mat_map[m],
+                let material = match tri.material {
+                    Some(m) => mat_map[&m],
                     None => default_mat,
                 };
-                desc.polygons.push(PolygonDesc { vertices: v, material, object, loc: Some(mesh_loc.clone()) });
+                desc.polygons.push(PolygonDesc { uvs, vertices: v, material, object, loc: Some(mesh_loc.clone()) });
             }
         }
         if desc.polygons.is_empty() {
@@ -464,6 +484,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             ));
         }
         desc.camera = camera;
+        desc.textures = std::mem::take(&mut self.textures);
         self.lights(&light_nodes, &mut desc)?;
         desc.warnings = std::mem::take(&mut self.warnings);
         Ok(desc)
@@ -693,19 +714,24 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
     }
 
     /// The material `mi` as a description (reflectance not range-checked here).
-    fn material(&mut self, mi: usize) -> MaterialDesc {
+    fn material(&mut self, mi: usize) -> Result<MaterialDesc> {
         let root = self.root;
         let m = &root.materials[mi];
         let name = name_or(&m.name, || format!("material{mi}"));
         let loc = self.at("materials", mi);
-        let has_base = self
-            .raw
-            .get("materials")
-            .and_then(|a| a.get(mi))
-            .and_then(|m| m.get("pbrMetallicRoughness"))
-            .and_then(|p| p.get("baseColorFactor"))
-            .is_some();
-        let reflectance = if has_base {
+        let raw_m = self.raw.get("materials").and_then(|a| a.get(mi));
+        let pbr = raw_m.and_then(|m| m.get("pbrMetallicRoughness"));
+        let has_base = pbr.and_then(|p| p.get("baseColorFactor")).is_some();
+        let base_texture = match pbr.and_then(|p| p.get("baseColorTexture")) {
+            Some(info) => self.texture_ref(info, mi, &name, "baseColorTexture")?,
+            None => None,
+        };
+        let emission_texture = match raw_m.and_then(|m| m.get("emissiveTexture")) {
+            Some(info) => self.texture_ref(info, mi, &name, "emissiveTexture")?,
+            None => None,
+        };
+        // With a texture, glTF's default factor 1.0 is the normal case: the texture is the colour.
+        let reflectance = if has_base || base_texture.is_some() {
             let c = m.pbr_metallic_roughness.base_color_factor.0;
             Rgb::new(c[0].into(), c[1].into(), c[2].into())
         } else {
@@ -726,7 +752,127 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             .map(|s| f64::from(s.emissive_strength.0))
             .unwrap_or(1.0);
         let emission = Rgb::new(e[0].into(), e[1].into(), e[2].into()) * strength;
-        MaterialDesc { name, reflectance, emission, two_sided: m.double_sided.then_some(true), loc: Some(loc) }
+        Ok(MaterialDesc { name, reflectance, emission, two_sided: m.double_sided.then_some(true), loc: Some(loc), base_texture, emission_texture })
+    }
+
+    /// The texture-coordinate sets material `mi`'s textures read (from the raw JSON:
+    /// `texCoord`, or `KHR_texture_transform`'s override).
+    fn material_tex_coords(&self, mi: usize) -> Vec<usize> {
+        let Some(m) = self.raw.get("materials").and_then(|a| a.get(mi)) else {
+            return Vec::new();
+        };
+        let infos = [m.get("pbrMetallicRoughness").and_then(|p| p.get("baseColorTexture")), m.get("emissiveTexture")];
+        let mut sets: Vec<usize> = infos.iter().flatten().map(|i| tex_coord_of(i) as usize).collect();
+        sets.sort_unstable();
+        sets.dedup();
+        sets
+    }
+
+    /// A material's `textureInfo` as a [`super::TextureRef`], decoding its image on first use.
+    /// None (with a warning) for a texture whose image is only in an unsupported extension.
+    fn texture_ref(&mut self, info: &serde_json::Value, mi: usize, mat: &str, what: &str) -> Result<Option<super::TextureRef>> {
+        let raw = self.raw;
+        let err = |s: &Self, msg: String| s.err("materials", mi, format!("material '{mat}': {what}: {msg}"));
+        let Some(ti) = info.get("index").and_then(|v| v.as_u64()).map(|v| v as usize) else {
+            return Err(err(self, "no texture index".into()));
+        };
+        let Some(tex) = raw.get("textures").and_then(|a| a.get(ti)) else {
+            return Err(err(self, format!("texture {ti} does not exist")));
+        };
+        let Some(image) = tex.get("source").and_then(|v| v.as_u64()).map(|v| v as usize) else {
+            self.warn(
+                self.at("textures", ti),
+                format!(
+                    "material '{mat}': {what}: texture {ti} has no PNG/JPEG source (only an extension's image, \
+                     e.g. WebP or KTX2); the material's factor is used alone"
+                ),
+            );
+            return Ok(None);
+        };
+        let mut wrap = [super::Wrap::Repeat; 2];
+        if let Some(si) = tex.get("sampler").and_then(|v| v.as_u64()) {
+            let Some(sampler) = raw.get("samplers").and_then(|a| a.get(si as usize)) else {
+                return Err(err(self, format!("texture {ti}: sampler {si} does not exist")));
+            };
+            for (k, key) in ["wrapS", "wrapT"].iter().enumerate() {
+                if let Some(code) = sampler.get(*key).and_then(|v| v.as_u64()) {
+                    wrap[k] = super::Wrap::from_gltf(code as u32)
+                        .ok_or_else(|| err(self, format!("sampler {si}: {key} {code} is not a glTF wrap mode")))?;
+                }
+            }
+        }
+        let texture = self.image_texture(image, ti)?;
+        let mut tref = super::TextureRef::new(texture, tex_coord_of(info));
+        tref.wrap = wrap;
+        if let Some(t) = info.get("extensions").and_then(|x| x.get("KHR_texture_transform")) {
+            let pair = |key: &str, d: [f64; 2]| -> [f64; 2] {
+                t.get(key)
+                    .and_then(|v| v.as_array())
+                    .filter(|a| a.len() == 2)
+                    .map(|a| [a[0].as_f64().unwrap_or(d[0]), a[1].as_f64().unwrap_or(d[1])])
+                    .unwrap_or(d)
+            };
+            let rotation = t.get("rotation").and_then(|v| v.as_f64()).unwrap_or(0.0);
+            tref = tref.with_transform(pair("offset", [0.0, 0.0]), rotation, pair("scale", [1.0, 1.0]));
+            if tref.transform.iter().flatten().any(|c| !c.is_finite()) {
+                return Err(err(self, "KHR_texture_transform has a non-finite value".into()));
+            }
+        }
+        Ok(Some(tref))
+    }
+
+    /// The scene texture of glTF image `ii` (decoded on first use).
+    fn image_texture(&mut self, ii: usize, ti: usize) -> Result<u32> {
+        if let Some(&t) = self.image_texture.get(&ii) {
+            return Ok(t);
+        }
+        let raw = self.raw;
+        let fail = |s: &Self, msg: String| s.err("images", ii, format!("image {ii}: {msg}"));
+        let Some(img) = raw.get("images").and_then(|a| a.get(ii)) else {
+            return Err(self.err("textures", ti, format!("texture {ti}: image {ii} does not exist")));
+        };
+        let label = img.get("name").and_then(|v| v.as_str()).map(str::to_string);
+        let (bytes, name): (Vec<u8>, String) = if let Some(uri) = img.get("uri").and_then(|v| v.as_str()) {
+            if uri.starts_with("data:") {
+                let Some(pos) = uri.find(";base64,") else {
+                    return Err(fail(self, "only base64 data: URIs are supported".into()));
+                };
+                let bytes = base64::engine::general_purpose::STANDARD
+                    .decode(uri[pos + 8..].trim_end())
+                    .map_err(|e| fail(self, format!("invalid base64 data: {e}")))?;
+                (bytes, label.unwrap_or_else(|| format!("image {ii}")))
+            } else if uri.contains("://") {
+                return Err(fail(self, format!("URL '{uri}' is not fetched; only relative file paths and data: URIs")));
+            } else {
+                let rel = percent_decode(uri);
+                let path: PathBuf = self.file.parent().map(|d| d.join(&rel)).unwrap_or_else(|| rel.clone().into());
+                match (self.load_file)(&rel) {
+                    Ok(d) => (d, path.display().to_string()),
+                    Err(e) => return Err(fail(self, format!("cannot read '{}': {e}", path.display()))),
+                }
+            }
+        } else if let Some(vi) = img.get("bufferView").and_then(|v| v.as_u64()) {
+            let vi = vi as usize;
+            let view = self.root.buffer_views.get(vi).ok_or_else(|| fail(self, format!("bufferView {vi} does not exist")))?;
+            let (bi, vo, vl) = (view.buffer.value(), view.byte_offset.map_or(0, |o| o.0), view.byte_length.0);
+            let data = self.buffer(bi)?;
+            let bytes = usize::try_from(vo)
+                .ok()
+                .zip(usize::try_from(vl).ok())
+                .and_then(|(o, l)| data.get(o..o.checked_add(l)?))
+                .map(<[u8]>::to_vec);
+            match bytes {
+                Some(b) => (b, label.unwrap_or_else(|| format!("image {ii}"))),
+                None => return Err(fail(self, format!("bufferView {vi} lies outside buffer {bi}"))),
+            }
+        } else {
+            return Err(fail(self, "neither a uri nor a bufferView".into()));
+        };
+        let tex = super::Texture::decode(&name, &bytes).map_err(|e| fail(self, format!("'{name}' {e}")))?;
+        let t = self.textures.len() as u32;
+        self.textures.push(std::sync::Arc::new(tex));
+        self.image_texture.insert(ii, t);
+        Ok(t)
     }
 
     /// All triangles of mesh `mi` in its own frame.
@@ -760,6 +906,28 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             };
             let positions = self.read_positions(pa.value(), &what)?;
             let n = positions.len();
+            // Texture coordinates of the sets the material's textures read (all or none).
+            let mut sets: Vec<Vec<DVec2>> = Vec::new();
+            let wanted = material.map(|m| self.material_tex_coords(m)).unwrap_or_default();
+            for set in 0..wanted.iter().max().map_or(0, |m| m + 1) {
+                let Some(ta) = prim.attributes.get(&Checked::Valid(Semantic::TexCoords(set as u32))) else {
+                    self.warn(
+                        self.at("meshes", mi),
+                        format!("{what}: its material's texture reads TEXCOORD_{set}, which it lacks; the texture's mean colour is used"),
+                    );
+                    sets.clear();
+                    break;
+                };
+                let vals = self.read_accessor(ta.value(), Type::Vec2, &what, &format!("TEXCOORD_{set}"))?;
+                if vals.len() != 2 * n {
+                    return Err(self.err(
+                        "accessors",
+                        ta.value(),
+                        format!("{what}: TEXCOORD_{set} has {} elements, POSITION {n}", vals.len() / 2),
+                    ));
+                }
+                sets.push(vals.chunks_exact(2).map(|c| DVec2::new(c[0], c[1])).collect());
+            }
             let idx: Vec<usize> = match prim.indices {
                 Some(ia) => {
                     let idx = self.read_indices(ia.value(), &what)?;
@@ -775,7 +943,10 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
                 None => (0..n).collect(),
             };
             let m = idx.len();
-            let mut push = |a: usize, b: usize, c: usize| tris.push(([positions[a], positions[b], positions[c]], material));
+            let mut push = |a: usize, b: usize, c: usize| {
+                let uv = sets.iter().map(|s| [s[a], s[b], s[c]]).collect();
+                tris.push(Tri { p: [positions[a], positions[b], positions[c]], material, uv })
+            };
             match mode {
                 Mode::Triangles => {
                     if m % 3 != 0 {
@@ -890,7 +1061,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             Checked::Valid(c) => c.0,
             Checked::Invalid => return Err(e(self, "invalid componentType".into())),
         };
-        let ncomp = if ty == Type::Vec3 { 3 } else { 1 };
+        let ncomp = ty.multiplicity();
         let count = usize::try_from(acc.count.0).map_err(|_| e(self, "count is too large".into()))?;
         let mut out: Vec<f64> = match acc.buffer_view {
             Some(v) => {
@@ -1070,6 +1241,13 @@ impl From<&str> for ViewError {
     fn from(m: &str) -> Self {
         ViewError::Msg(m.into())
     }
+}
+
+/// The texture-coordinate set a `textureInfo` reads (`KHR_texture_transform` may override).
+fn tex_coord_of(info: &serde_json::Value) -> u32 {
+    let own = info.get("texCoord").and_then(|v| v.as_u64()).unwrap_or(0);
+    let over = info.get("extensions").and_then(|x| x.get("KHR_texture_transform")).and_then(|t| t.get("texCoord")).and_then(|v| v.as_u64());
+    over.unwrap_or(own).min(7) as u32
 }
 
 fn comp_size(c: ComponentType) -> usize {

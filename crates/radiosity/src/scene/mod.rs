@@ -19,6 +19,7 @@ pub mod builtin;
 pub mod camera;
 pub mod gltf;
 pub mod obj;
+pub mod texture;
 pub mod toml_file;
 mod validate;
 pub use validate::MAX_SUN_DIAMETER_DEG;
@@ -26,10 +27,12 @@ pub mod vs3;
 
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 
 pub use camera::Camera;
+pub use texture::{Texture, TextureRef, UvMap, Wrap};
 pub use validate::PLANARITY_TOL;
 pub use crate::geom::newell_normal;
 
@@ -150,12 +153,16 @@ pub struct MaterialDesc {
     pub two_sided: Option<bool>,
     /// Where it was defined.
     pub loc: Option<Location>,
+    /// A texture that multiplies `reflectance` (glTF `baseColorTexture`, MTL `map_Kd`).
+    pub base_texture: Option<TextureRef>,
+    /// A texture that multiplies `emission` (glTF `emissiveTexture`, MTL `map_Ke`).
+    pub emission_texture: Option<TextureRef>,
 }
 
 impl MaterialDesc {
     /// A non-emitting material.
     pub fn diffuse(name: &str, reflectance: Rgb) -> Self {
-        MaterialDesc { name: name.into(), reflectance, emission: Rgb::ZERO, two_sided: None, loc: None }
+        MaterialDesc { name: name.into(), reflectance, emission: Rgb::ZERO, two_sided: None, loc: None, base_texture: None, emission_texture: None }
     }
 }
 
@@ -179,6 +186,9 @@ pub struct PolygonDesc {
     pub object: u32,
     /// Where it was defined (OBJ `f` line).
     pub loc: Option<Location>,
+    /// Texture coordinates per set (glTF `TEXCOORD_n`, OBJ `vt` as set 0), one per vertex
+    /// (u right, v down the image); empty without.
+    pub uvs: Vec<Vec<DVec2>>,
 }
 
 /// A uniform sky: every ray that leaves the geometry sees the same radiance (a constant
@@ -322,6 +332,8 @@ pub struct SceneDesc {
     pub sky: Option<Sky>,
     /// Point, spot and directional lights (glTF KHR_lights_punctual, TOML `[[lights]]`).
     pub lights: Vec<Light>,
+    /// Decoded textures, indexed by [`TextureRef::texture`].
+    pub textures: Vec<Arc<Texture>>,
 }
 
 /// A validated material.
@@ -329,12 +341,19 @@ pub struct SceneDesc {
 pub struct Material {
     /// Name.
     pub name: String,
-    /// Diffuse reflectance ρ in [0,1) per channel.
+    /// Diffuse reflectance ρ in [0,1) per channel; with a texture, the texture's mean
+    /// times the factor (per point and per element: [`Scene::reflectance_at`],
+    /// [`Scene::surface_means`]).
     pub reflectance: Rgb,
-    /// Emitted radiance L_e per channel (W/(m²·sr) or scene units).
+    /// Emitted radiance L_e per channel (W/(m²·sr) or scene units); with a texture, its
+    /// mean times the factor.
     pub emission: Rgb,
     /// Whether surfaces with it are two-sided (already expanded into polygons).
     pub two_sided: bool,
+    /// The reflectance texture and the factor it is multiplied by.
+    pub base_texture: Option<(TextureRef, Rgb)>,
+    /// The emission texture and its factor.
+    pub emission_texture: Option<(TextureRef, Rgb)>,
 }
 
 impl Material {
@@ -345,6 +364,10 @@ impl Material {
     /// True if it emits light.
     pub fn is_emitter(&self) -> bool {
         self.emission.max_element() > 0.0
+    }
+    /// True if a texture varies its reflectance or emission.
+    pub fn is_textured(&self) -> bool {
+        self.base_texture.is_some() || self.emission_texture.is_some()
     }
 }
 
@@ -375,6 +398,8 @@ pub struct Polygon {
     pub two_sided: bool,
     /// Where the input polygon it came from was defined (OBJ `f` line), for messages.
     pub loc: Option<Location>,
+    /// Texture coordinates per set as affine maps of the plane (empty without).
+    pub uv: Vec<UvMap>,
 }
 
 impl Polygon {
@@ -410,6 +435,8 @@ pub struct Scene {
     pub sky: Option<Sky>,
     /// Point, spot and directional lights that give light (validated; dark ones dropped).
     pub lights: Vec<Light>,
+    /// Decoded textures ([`Material::base_texture`], [`Material::emission_texture`]).
+    pub textures: Vec<Arc<Texture>>,
 }
 
 impl Scene {
@@ -483,6 +510,48 @@ impl Scene {
             self.lost_light.join("; ")
         };
         Err(Error::input(Location::file(&self.file), format!("no surface emits light: {why}")))
+    }
+
+    /// A textured channel of polygon `poly` at point `x`, filtered over `footprint` (scene
+    /// units², 0 for the finest texels); None when the material has no such texture or the
+    /// polygon no coordinates for it.
+    fn textured_at(&self, poly: usize, tex: &Option<(TextureRef, Rgb)>, x: DVec3, footprint: f64) -> Option<Rgb> {
+        let (tref, factor) = tex.as_ref()?;
+        let map = self.polygons[poly].uv.get(tref.tex_coord as usize)?;
+        let t = self.textures.get(tref.texture as usize)?;
+        Some(t.at_point(tref, map, x, footprint) * *factor)
+    }
+
+    /// Reflectance of polygon `poly` at point `x` (the texel under it times the factor,
+    /// lowered to [`MAX_REFLECTANCE`]), filtered over `footprint` scene units².
+    pub fn reflectance_at(&self, poly: usize, x: DVec3, footprint: f64) -> Rgb {
+        let m = &self.materials[self.polygons[poly].material as usize];
+        match self.textured_at(poly, &m.base_texture, x, footprint) {
+            Some(r) => r.min(Rgb::splat(MAX_REFLECTANCE)),
+            None => m.reflectance,
+        }
+    }
+
+    /// Emitted radiance of polygon `poly` at point `x`.
+    pub fn emission_at(&self, poly: usize, x: DVec3, footprint: f64) -> Rgb {
+        let m = &self.materials[self.polygons[poly].material as usize];
+        self.textured_at(poly, &m.emission_texture, x, footprint).unwrap_or(m.emission)
+    }
+
+    /// Mean reflectance and emitted radiance over a convex piece (`corners`) of polygon
+    /// `poly`: the textures integrated over it times the factors (the material's constants
+    /// where it has no texture).
+    pub fn surface_means(&self, poly: usize, corners: &[DVec3]) -> (Rgb, Rgb) {
+        let p = &self.polygons[poly];
+        let m = &self.materials[p.material as usize];
+        let mean = |tex: &Option<(TextureRef, Rgb)>| -> Option<Rgb> {
+            let (tref, factor) = tex.as_ref()?;
+            let map = p.uv.get(tref.tex_coord as usize)?;
+            let t = self.textures.get(tref.texture as usize)?;
+            Some(t.mean_over(tref, map, corners) * *factor)
+        };
+        let rho = mean(&m.base_texture).map_or(m.reflectance, |r| r.min(Rgb::splat(MAX_REFLECTANCE)));
+        (rho, mean(&m.emission_texture).unwrap_or(m.emission))
     }
 
     /// True if `object` only blocks rays (see [`SceneDesc::obstructions`]).

@@ -2,16 +2,21 @@
 //!
 //! Faces keep all their vertices (an n-gon stays one polygon; validation splits it only if
 //! it is not planar). `o` and `g` each start a new object (the unit of the report); MTL
-//! `Kd` is diffuse reflectance and `Ke` emitted radiance (PRODUCT.md). Every error names
-//! the file and line. Written by hand rather than with `tobj` because tobj's errors carry
+//! `Kd` is diffuse reflectance and `Ke` emitted radiance (PRODUCT.md). `map_Kd` and
+//! `map_Ke` (PNG or JPEG, relative to the MTL file; options `-o` offset, `-s` scale and
+//! `-clamp on` are read, the others skipped) multiply them, read through the faces' `vt`
+//! coordinates (v flipped: OBJ's v runs up the image); a map without a `Kd`/`Ke` line
+//! multiplies 1. Every error names the file and line. Written by hand rather than with `tobj` because tobj's errors carry
 //! no line numbers and it accepts NaN coordinates silently.
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use glam::DVec3;
+use std::sync::Arc;
 
-use super::{MaterialDesc, ObjectDesc, PolygonDesc, SceneDesc};
+use glam::{DVec2, DVec3};
+
+use super::{MaterialDesc, ObjectDesc, PolygonDesc, SceneDesc, Texture, TextureRef, Wrap};
 use crate::{Error, Location, Result, Rgb, Warning};
 
 /// Reflectance given to faces that have no `usemtl`.
@@ -21,13 +26,40 @@ pub const DEFAULT_REFLECTANCE: f64 = 0.5;
 pub fn load_obj(path: &Path) -> Result<SceneDesc> {
     let text = read_text(path)?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mut textures: Vec<Arc<Texture>> = Vec::new();
+    let mut by_path: HashMap<PathBuf, u32> = HashMap::new();
     let mut desc = parse_obj(&text, path, |name, loc| {
         let p: PathBuf = dir.join(name);
         let t = super::read_input(&p).map_err(|e| {
             Error::input(loc.clone(), format!("cannot read material library '{}': {e}", p.display()))
         })?;
-        parse_mtl(&String::from_utf8_lossy(&t), &p)
+        let (mut mats, maps) = parse_mtl_maps(&String::from_utf8_lossy(&t), &p)?;
+        // Decode each map once; the materials' references become scene texture indices.
+        let mdir = p.parent().map(Path::to_path_buf).unwrap_or_default();
+        let mut index = Vec::with_capacity(maps.len());
+        for (file, mloc) in maps {
+            let tp = mdir.join(&file);
+            if let Some(&k) = by_path.get(&tp) {
+                index.push(k);
+                continue;
+            }
+            let bytes = super::read_input(&tp)
+                .map_err(|e| Error::input(mloc.clone(), format!("cannot read texture '{}': {e}", tp.display())))?;
+            let tex = Texture::decode(&tp.display().to_string(), &bytes)
+                .map_err(|e| Error::input(mloc.clone(), format!("texture '{}' {e}", tp.display())))?;
+            let k = textures.len() as u32;
+            textures.push(Arc::new(tex));
+            by_path.insert(tp, k);
+            index.push(k);
+        }
+        for m in &mut mats {
+            for t in [&mut m.base_texture, &mut m.emission_texture].into_iter().flatten() {
+                t.texture = index[t.texture as usize];
+            }
+        }
+        Ok(mats)
     })?;
+    desc.textures = textures;
     desc.name = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
     Ok(desc)
 }
@@ -85,6 +117,7 @@ pub fn parse_obj(
         ..Default::default()
     };
     let mut positions: Vec<DVec3> = Vec::new();
+    let mut texcoords: Vec<DVec2> = Vec::new();
     let mut mat_index: HashMap<String, u32> = HashMap::new();
     let mut current_mat: Option<u32> = None;
     let mut default_mat: Option<u32> = None;
@@ -121,11 +154,40 @@ pub fn parse_obj(
                 }
                 positions.push(p);
             }
-            "vt" | "vn" | "vp" | "s" | "mg" | "shadow_obj" | "trace_obj" => {}
+            "vt" => {
+                let vals: Vec<&str> = toks.collect();
+                let u = parse_f64(vals.first().copied().unwrap_or(""), &loc, "texture coordinate u")?;
+                let v = match vals.get(1) {
+                    Some(t) => parse_f64(t, &loc, "texture coordinate v")?,
+                    None => 0.0,
+                };
+                texcoords.push(DVec2::new(u, 1.0 - v));
+            }
+            "vn" | "vp" | "s" | "mg" | "shadow_obj" | "trace_obj" => {}
             "f" | "fo" => {
                 let mut verts = Vec::new();
+                let mut uv: Vec<DVec2> = Vec::new();
+                let mut all_uv = true;
                 for t in toks {
-                    let first = t.split('/').next().unwrap_or("");
+                    let mut parts = t.split('/');
+                    let first = parts.next().unwrap_or("");
+                    match parts.next().filter(|s| !s.is_empty()) {
+                        Some(ts) if all_uv => {
+                            let i: i64 = ts.parse().map_err(|_| {
+                                Error::input(loc.clone(), format!("face vertex '{t}': texture index '{ts}' is not an index"))
+                            })?;
+                            let n = texcoords.len() as i64;
+                            let idx = if i > 0 { i - 1 } else { n + i };
+                            if i == 0 || idx < 0 || idx >= n {
+                                return Err(Error::input(
+                                    loc.clone(),
+                                    format!("face texture index {i} is out of range (there are {n} vt so far)"),
+                                ));
+                            }
+                            uv.push(texcoords[idx as usize]);
+                        }
+                        _ => all_uv = false,
+                    }
                     let i: i64 = first
                         .parse()
                         .map_err(|_| Error::input(loc.clone(), format!("face vertex '{t}' is not an index")))?;
@@ -161,7 +223,8 @@ pub fn parse_obj(
                     desc.objects.push(ObjectDesc { name: default_obj_name.clone(), loc: Some(loc.clone()) });
                     (desc.objects.len() - 1) as u32
                 });
-                desc.polygons.push(PolygonDesc { vertices: verts, material, object, loc: Some(loc) });
+                let uvs = if all_uv && uv.len() == verts.len() { vec![uv] } else { Vec::new() };
+                desc.polygons.push(PolygonDesc { uvs, vertices: verts, material, object, loc: Some(loc) });
             }
             "o" | "g" => {
                 let name = toks.collect::<Vec<_>>().join(" ");
@@ -220,10 +283,74 @@ pub fn parse_obj(
     Ok(desc)
 }
 
-/// Parses MTL text into materials (`Kd` reflectance, `Ke` emitted radiance).
+/// Parses MTL text into materials (`Kd` reflectance, `Ke` emitted radiance); texture maps
+/// are dropped (see [`parse_mtl_maps`]).
 pub fn parse_mtl(text: &str, file: &Path) -> Result<Vec<MaterialDesc>> {
+    let (mut mats, _) = parse_mtl_maps(text, file)?;
+    for m in &mut mats {
+        m.base_texture = None;
+        m.emission_texture = None;
+    }
+    Ok(mats)
+}
+
+/// A texture map's file name (relative to its MTL file) and where it was named.
+pub type MapFile = (String, Location);
+
+/// A `map_Kd`/`map_Ke` statement: the image's file name (relative to the MTL) and a
+/// reference whose `texture` indexes the returned list of maps.
+fn parse_map(rest: &[&str], loc: &Location, maps: &mut Vec<MapFile>) -> Result<TextureRef> {
+    let (mut offset, mut scale, mut clamp) = ([0.0; 2], [1.0; 2], false);
+    let mut i = 0;
+    let num = |k: usize| -> Result<f64> { parse_f64(rest.get(k).copied().unwrap_or(""), loc, "texture map option") };
+    while i < rest.len() && rest[i].starts_with('-') && rest.len() - i > 1 {
+        // Options take up to three numbers (u v w); read what is numeric.
+        let opt = rest[i];
+        let nums = rest[i + 1..].iter().take(3).take_while(|t| t.parse::<f64>().is_ok()).count();
+        match opt {
+            "-o" | "-s" => {
+                let u = num(i + 1)?;
+                let v = if nums >= 2 { num(i + 2)? } else { if opt == "-s" { 1.0 } else { 0.0 } };
+                if opt == "-o" {
+                    offset = [u, v];
+                } else {
+                    scale = [u, v];
+                }
+                i += 1 + nums;
+            }
+            "-clamp" => {
+                clamp = rest[i + 1] == "on";
+                i += 2;
+            }
+            "-blendu" | "-blendv" | "-cc" | "-imfchan" | "-type" | "-texres" | "-boost" | "-bm" => i += 2,
+            "-mm" => i += 1 + nums.min(2),
+            "-t" => i += 1 + nums,
+            _ => i += 1,
+        }
+    }
+    if i >= rest.len() {
+        return Err(Error::input(loc.clone(), "texture map needs a file name"));
+    }
+    let name = rest[i..].join(" ");
+    maps.push((name, loc.clone()));
+    // OBJ's v runs up: the reader flips v (v' = 1 − v), so an offset or scale in v acts
+    // about the flipped axis: v_obj' = s·v_obj + o  ⇒  v' = s·v' + (1 − s − o).
+    let mut r = TextureRef::new((maps.len() - 1) as u32, 0).with_transform([offset[0], 1.0 - scale[1] - offset[1]], 0.0, scale);
+    if clamp {
+        r.wrap = [Wrap::ClampToEdge; 2];
+    }
+    Ok(r)
+}
+
+/// Parses MTL text into materials and the texture maps they use (file name relative to the
+/// MTL file, and where it was named); each material's [`TextureRef::texture`] indexes
+/// that list.
+pub fn parse_mtl_maps(text: &str, file: &Path) -> Result<(Vec<MaterialDesc>, Vec<MapFile>)> {
     let mut mats: Vec<MaterialDesc> = Vec::new();
-    let mut warned_tex = false;
+    let mut maps: Vec<MapFile> = Vec::new();
+    // Kd/Ke lines seen per material (a map without one multiplies 1).
+    let mut has_kd: Vec<bool> = Vec::new();
+    let mut has_ke: Vec<bool> = Vec::new();
     for (lineno, raw) in logical_lines(text) {
         let line = strip_comment(&raw);
         let mut toks = line.split_whitespace();
@@ -234,7 +361,11 @@ pub fn parse_mtl(text: &str, file: &Path) -> Result<Vec<MaterialDesc>> {
             if rest.is_empty() {
                 return Err(Error::input(loc, "newmtl needs a name"));
             }
+            has_kd.push(false);
+            has_ke.push(false);
             mats.push(MaterialDesc {
+                base_texture: None,
+                emission_texture: None,
                 name: rest.join(" "),
                 reflectance: Rgb::ZERO,
                 emission: Rgb::ZERO,
@@ -273,6 +404,7 @@ pub fn parse_mtl(text: &str, file: &Path) -> Result<Vec<MaterialDesc>> {
                     }
                     m.reflectance = c;
                     m.loc = Some(loc);
+                    has_kd[mats.len() - 1] = true;
                 } else {
                     if c.to_array().iter().any(|x| *x < 0.0) {
                         return Err(Error::input(
@@ -292,19 +424,36 @@ pub fn parse_mtl(text: &str, file: &Path) -> Result<Vec<MaterialDesc>> {
                         ));
                     }
                     m.emission = c;
+                    has_ke[mats.len() - 1] = true;
                 }
             }
-            k if k.starts_with("map_") || matches!(k, "bump" | "disp" | "decal" | "refl" | "norm") => {
-                if !warned_tex {
-                    warned_tex = true; // textures: constant colours only for now
+            "map_Kd" | "map_Ke" => {
+                let Some(m) = mats.last_mut() else {
+                    return Err(Error::input(loc, format!("{kw} before any newmtl")));
+                };
+                let r = parse_map(&rest, &loc, &mut maps)?;
+                if kw == "map_Kd" {
+                    m.base_texture = Some(r);
+                } else {
+                    m.emission_texture = Some(r);
                 }
             }
+            // Other maps (specular, bump, alpha ...) do not change diffuse light.
+            k if k.starts_with("map_") || matches!(k, "bump" | "disp" | "decal" | "refl" | "norm") => {}
             "Ka" | "Ks" | "Kt" | "Tf" | "Ns" | "Ni" | "d" | "Tr" | "illum" | "sharpness" | "Pr" | "Pm" | "Ps"
             | "Pc" | "Pcr" | "aniso" | "anisor" => {}
             _ => {}
         }
     }
-    Ok(mats)
+    for (k, m) in mats.iter_mut().enumerate() {
+        if m.base_texture.is_some() && !has_kd[k] {
+            m.reflectance = Rgb::ONE;
+        }
+        if m.emission_texture.is_some() && !has_ke[k] {
+            m.emission = Rgb::ONE;
+        }
+    }
+    Ok((mats, maps))
 }
 
 #[cfg(test)]

@@ -480,6 +480,8 @@ fn add_light(desc: &mut SceneDesc, k: usize, l: &Spanned<LightToml>, at: &dyn Fn
             }
             let material = desc.materials.len() as u32;
             desc.materials.push(MaterialDesc {
+                base_texture: None,
+                emission_texture: None,
                 name: format!("light:{name}"),
                 reflectance: Rgb::ZERO,
                 emission: rgb(&t.radiance, "radiance")?,
@@ -488,7 +490,7 @@ fn add_light(desc: &mut SceneDesc, k: usize, l: &Spanned<LightToml>, at: &dyn Fn
             });
             let object = desc.objects.len() as u32;
             desc.objects.push(ObjectDesc { name: name.clone(), loc: Some(loc.clone()) });
-            desc.polygons.push(PolygonDesc { vertices: vec![c, c + e1, c + e1 + e2, c + e2], material, object, loc: Some(loc) });
+            desc.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: vec![c, c + e1, c + e1 + e2, c + e2], material, object, loc: Some(loc) });
             return Ok(());
         }
     };

@@ -28,6 +28,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
         ignored_lights,
         sky,
         lights,
+        textures,
     } = desc;
     // The scene's file: where its polygons came from (built-in scenes: the name).
     let file = polygons.iter().find_map(|p| p.loc.as_ref().map(|l| l.file.clone())).unwrap_or_else(|| name.clone().into());
@@ -36,6 +37,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     // Materials: physical values only.
     let mut mats = Vec::with_capacity(materials.len());
     let mut capped: Vec<String> = Vec::new();
+    let mut tex_capped: Vec<String> = Vec::new();
     for m in &materials {
         let r = m.reflectance.to_array();
         if r.iter().any(|c| !c.is_finite() || *c < 0.0) {
@@ -45,7 +47,9 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             ));
         }
         let mut reflectance = m.reflectance;
-        if r.iter().any(|c| *c >= 1.0) {
+        // With a texture the factor may be 1 (glTF's default): the product is capped per
+        // texel read instead ([`super::Scene::reflectance_at`]).
+        if m.base_texture.is_none() && r.iter().any(|c| *c >= 1.0) {
             if strict {
                 return Err(Error::input(
                     here(&m.loc),
@@ -79,7 +83,34 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
                 ),
             ));
         }
-        mats.push(Material { name: m.name.clone(), reflectance, emission: m.emission, two_sided: m.two_sided.unwrap_or(two_sided) });
+        // Textures multiply the factors; the material's constants become their means.
+        let mut texture = |t: &Option<super::TextureRef>, factor: crate::Rgb, what: &str| -> Result<Option<(super::TextureRef, crate::Rgb)>> {
+            let Some(t) = t else { return Ok(None) };
+            let Some(img) = textures.get(t.texture as usize) else {
+                return Err(Error::input(
+                    here(&m.loc),
+                    format!("material '{}': {what} texture {} does not exist ({} textures)", m.name, t.texture, textures.len()),
+                ));
+            };
+            if (img.max * factor).max_element() >= 1.0 && what == "reflectance" {
+                tex_capped.push(format!("'{}' ({})", m.name, img.name));
+            }
+            Ok(Some((t.clone(), factor)))
+        };
+        let base_texture = texture(&m.base_texture, reflectance, "reflectance")?;
+        let emission_texture = texture(&m.emission_texture, m.emission, "emission")?;
+        let mean = |t: &Option<(super::TextureRef, crate::Rgb)>, c: crate::Rgb| match t {
+            Some((r, f)) => textures[r.texture as usize].mean * *f,
+            None => c,
+        };
+        mats.push(Material {
+            name: m.name.clone(),
+            reflectance: mean(&base_texture, reflectance).min(crate::Rgb::splat(MAX_REFLECTANCE)),
+            emission: mean(&emission_texture, m.emission),
+            two_sided: m.two_sided.unwrap_or(two_sided),
+            base_texture,
+            emission_texture,
+        });
     }
     if let Some(sky) = &sky {
         let e = sky.radiance.to_array();
@@ -121,6 +152,17 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
                  in {} material(s): {}",
                 capped.len(),
                 capped.join(", ")
+            ),
+        });
+    }
+    if !tex_capped.is_empty() {
+        warnings.push(Warning {
+            loc: Some(Location::file(&file)),
+            msg: format!(
+                "texels whose reflectance (texture × factor) reaches 1 are lowered to {MAX_REFLECTANCE} in {} \
+                 material(s): {}",
+                tex_capped.len(),
+                tex_capped.join(", ")
             ),
         });
     }
@@ -177,6 +219,17 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             return Err(Error::input(here(&p.loc), "polygon refers to a material or object that does not exist"));
         }
         let emits = mats[p.material as usize].is_emitter();
+        if let Some(bad) = p.uvs.iter().find(|set| set.len() != p.vertices.len() || set.iter().any(|t| !t.is_finite())) {
+            return Err(Error::input(
+                here(&p.loc),
+                format!(
+                    "polygon has {} vertices but {} texture coordinates (or a non-finite one)",
+                    p.vertices.len(),
+                    bad.len()
+                ),
+            ));
+        }
+        let uv: Vec<super::UvMap> = p.uvs.iter().map(|set| super::UvMap::fit(&p.vertices, set)).collect();
         let mut pieces: Vec<Vec<DVec3>> = Vec::new();
         match clean_polygon(&p.vertices, diag) {
             Err(why) => {
@@ -234,9 +287,10 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
                     back_side: true,
                     two_sided: true,
                     loc: p.loc.clone(),
+                    uv: uv.clone(),
                 });
             }
-            out.push(Polygon { vertices: v, normal, area, material: p.material, object: p.object, back_side: false, two_sided: two, loc: p.loc.clone() });
+            out.push(Polygon { vertices: v, normal, area, material: p.material, object: p.object, back_side: false, two_sided: two, loc: p.loc.clone(), uv: uv.clone() });
         }
         if out.len() == before {
             tiny.add(&p.loc, "too small for the scene's size");
@@ -302,7 +356,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     }
     obstructions.sort_unstable();
     obstructions.dedup();
-    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions, file, lost_light, sky, lights })
+    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions, file, lost_light, sky, lights, textures })
 }
 
 /// Polygons skipped for one reason: how many, and the first.
@@ -602,7 +656,7 @@ mod tests {
             polygons: polys
                 .into_iter()
                 .enumerate()
-                .map(|(i, v)| PolygonDesc { vertices: v, material: 0, object: 0, loc: Some(Location::line("t.obj", i + 1)) })
+                .map(|(i, v)| PolygonDesc { uvs: Vec::new(), vertices: v, material: 0, object: 0, loc: Some(Location::line("t.obj", i + 1)) })
                 .collect(),
             ..Default::default()
         }

@@ -196,6 +196,8 @@ pub fn parse_vs3(text: &str, path: &Path) -> Result<(SceneDesc, Vs3Control)> {
         let material = desc.materials.len() as u32;
         let rho = if s.obstruction { 0.0 } else { 1.0 - s.emit };
         desc.materials.push(MaterialDesc {
+            base_texture: None,
+            emission_texture: None,
             name: s.name.clone(),
             reflectance: Rgb::splat(rho),
             emission: Rgb::ZERO,
@@ -205,7 +207,7 @@ pub fn parse_vs3(text: &str, path: &Path) -> Result<(SceneDesc, Vs3Control)> {
         let subs: Vec<&Surface> = surfaces.iter().filter(|t| t.base == s.number).collect();
         let pieces = if subs.is_empty() { vec![s.verts.clone()] } else { cut_subsurfaces(s, &subs)? };
         for v in pieces {
-            desc.polygons.push(PolygonDesc { vertices: v, material, object: object_of[k], loc: Some(s.loc.clone()) });
+            desc.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: v, material, object: object_of[k], loc: Some(s.loc.clone()) });
         }
     }
     Ok((desc, ctrl))

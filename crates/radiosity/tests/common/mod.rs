@@ -11,7 +11,7 @@ pub fn quads(quads: &[(&str, [DVec3; 4])]) -> Scene {
     d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
     for (k, (name, v)) in quads.iter().enumerate() {
         d.objects.push(ObjectDesc { name: (*name).into(), loc: None });
-        d.polygons.push(PolygonDesc { vertices: v.to_vec(), material: 0, object: k as u32, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: v.to_vec(), material: 0, object: k as u32, loc: None });
     }
     Scene::from_desc(d).unwrap()
 }
@@ -84,7 +84,7 @@ pub fn model_in_furnace(rel: &str, one_sided_room: bool) -> Option<Scene> {
         0
     };
     for f in box_faces(lo - pad, hi + pad, true) {
-        d.polygons.push(PolygonDesc { vertices: f, material, object: obj, loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material, object: obj, loc: None });
     }
     d.camera = None;
     Some(Scene::from_desc(d).unwrap())

@@ -155,8 +155,8 @@ pub fn two_surfaces(from: Vec<DVec3>, to: Vec<DVec3>) -> Scene {
         materials: vec![MaterialDesc::diffuse("grey", Rgb::splat(0.5))],
         objects: vec![ObjectDesc { name: "from".into(), loc: None }, ObjectDesc { name: "to".into(), loc: None }],
         polygons: vec![
-            PolygonDesc { vertices: from, material: 0, object: 0, loc: None },
-            PolygonDesc { vertices: to, material: 0, object: 1, loc: None },
+            PolygonDesc { uvs: Vec::new(), vertices: from, material: 0, object: 0, loc: None },
+            PolygonDesc { uvs: Vec::new(), vertices: to, material: 0, object: 1, loc: None },
         ],
         ..Default::default()
     };
@@ -205,7 +205,7 @@ impl Kind {
         };
         for (o, polys) in [(0u32, disk(r1, 0.0, true)), (1, disk(r2, h, false))] {
             for v in polys {
-                desc.polygons.push(PolygonDesc { vertices: v, material: 0, object: o, loc: None });
+                desc.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: v, material: 0, object: o, loc: None });
             }
         }
         Scene::from_desc(desc).unwrap()
