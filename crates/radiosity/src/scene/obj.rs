@@ -179,12 +179,20 @@ pub fn parse_obj(
                             let n = texcoords.len() as i64;
                             let idx = if i > 0 { i - 1 } else { n + i };
                             if i == 0 || idx < 0 || idx >= n {
-                                return Err(Error::input(
-                                    loc.clone(),
-                                    format!("face texture index {i} is out of range (there are {n} vt so far)"),
-                                ));
+                                // Texture coordinates are optional for light: warn, keep the face.
+                                if warned.insert("vt-range".into()) {
+                                    desc.warnings.push(Warning {
+                                        loc: Some(loc.clone()),
+                                        msg: format!(
+                                            "face texture index {i} is out of range (there are {n} vt so far); such \
+                                             faces are read without texture coordinates"
+                                        ),
+                                    });
+                                }
+                                all_uv = false;
+                            } else {
+                                uv.push(texcoords[idx as usize]);
                             }
-                            uv.push(texcoords[idx as usize]);
                         }
                         _ => all_uv = false,
                     }
