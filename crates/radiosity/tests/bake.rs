@@ -154,7 +154,58 @@ fn cornell_atlas_is_isometric_padded_disjoint_and_well_used() {
     }
     let (used, covered) = (atlas.used(), atlas.covered(&scene));
     eprintln!("Cornell atlas 512²: {} charts, {:.1} % in charts, {:.1} % covered", atlas.charts.len(), 100.0 * used, 100.0 * covered);
-    assert!(used >= 0.75 && covered >= 0.6, "used {used}, covered {covered}");
+    assert!(covered >= 0.6, "used {used}, covered {covered}");
+    assert_no_overlap(&scene, &atlas);
+}
+
+/// No texel centre lies inside two polygons of the atlas (unfolded charts must not fold
+/// onto themselves).
+fn assert_no_overlap(scene: &Scene, atlas: &radiosity::mesh::atlas::Atlas) {
+    let n = atlas.size;
+    let mut owner = vec![u32::MAX; n * n];
+    let mut twice = 0;
+    for (i, p) in scene.polygons.iter().enumerate() {
+        let t: Vec<(f64, f64)> = p.vertices.iter().map(|&x| atlas.texel_coords(i as u32, x)).collect();
+        let (x0, x1) = t.iter().fold((f64::MAX, f64::MIN), |(l, h), q| (l.min(q.0), h.max(q.0)));
+        let (y0, y1) = t.iter().fold((f64::MAX, f64::MIN), |(l, h), q| (l.min(q.1), h.max(q.1)));
+        let area: f64 = (0..t.len()).map(|k| t[k].0 * t[(k + 1) % t.len()].1 - t[(k + 1) % t.len()].0 * t[k].1).sum();
+        for y in (y0.floor().max(0.0) as usize)..(y1.ceil() as usize).min(n) {
+            for x in (x0.floor().max(0.0) as usize)..(x1.ceil() as usize).min(n) {
+                let c = (x as f64 + 0.5, y as f64 + 0.5);
+                // Strictly inside (a centre on a shared edge belongs to neither test).
+                let inside = (0..t.len()).all(|k| {
+                    let (a, b) = (t[k], t[(k + 1) % t.len()]);
+                    ((b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0)) * area.signum() > 1e-9
+                });
+                if inside {
+                    if owner[y * n + x] != u32::MAX {
+                        twice += 1;
+                    }
+                    owner[y * n + x] = i as u32;
+                }
+            }
+        }
+    }
+    assert_eq!(twice, 0, "{twice} texel centres lie inside two polygons");
+}
+
+/// The RenderPark classroom (reads ../shared; skips without): its surfaces cover at least
+/// 60 % of a default 1024² lightmap (charts grown across bends, packed to 95 %), without
+/// a texel inside two polygons.
+#[test]
+fn classroom_atlas_covers_sixty_percent() {
+    use radiosity::mesh::atlas::{Atlas, Options as AtlasOptions};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes/renderpark-classroom/classroom.obj");
+    if !path.exists() {
+        eprintln!("skipped: {} not found (../shared is not beside the clone)", path.display());
+        return;
+    }
+    let scene = radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    let atlas = Atlas::build(&scene, &AtlasOptions::default()).unwrap();
+    let (used, covered) = (atlas.used(), atlas.covered(&scene));
+    eprintln!("classroom atlas 1024²: {} charts, {:.1} % in charts, {:.1} % covered", atlas.charts.len(), 100.0 * used, 100.0 * covered);
+    assert!(covered >= 0.6, "covered {covered}");
+    assert_no_overlap(&scene, &atlas);
 }
 
 /// A lightmap of the furnace box: every texel of every chart, padding included, holds the
@@ -183,4 +234,32 @@ fn furnace_lightmap_texels_are_all_the_closed_form() {
         }
     }
     assert_eq!(n, st.shaded + st.dilated + st.flat);
+}
+
+/// Diagnostic (ignored): the atlas of any scene, `SCENE=path SIZE=2048 cargo test --release
+/// -p radiosity --test bake atlas_of_a_scene -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn atlas_of_a_scene() {
+    use radiosity::mesh::atlas::{Atlas, Options as AtlasOptions};
+    let Ok(path) = std::env::var("SCENE") else {
+        eprintln!("set SCENE");
+        return;
+    };
+    let size: usize = std::env::var("SIZE").ok().and_then(|s| s.parse().ok()).unwrap_or(1024);
+    let mut desc = radiosity::scene::load(&path).unwrap();
+    desc.two_sided = std::env::var("TWO_SIDED").is_ok();
+    let scene = Scene::from_desc(desc).unwrap();
+    let t = std::time::Instant::now();
+    match Atlas::build(&scene, &AtlasOptions { size, ..Default::default() }) {
+        Ok(atlas) => eprintln!(
+            "{path} {size}²: {} polygons, {} charts, {:.1} % in charts, {:.1} % covered, {:.2} s",
+            scene.polygons.len(),
+            atlas.charts.len(),
+            100.0 * atlas.used(),
+            100.0 * atlas.covered(&scene),
+            t.elapsed().as_secs_f64()
+        ),
+        Err(e) => eprintln!("{path} {size}²: {e} ({:.2} s)", t.elapsed().as_secs_f64()),
+    }
 }

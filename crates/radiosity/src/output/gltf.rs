@@ -410,10 +410,9 @@ pub fn baked_glb(
                 .zip(&part.patches)
                 .map(|(&v, &p)| {
                     let x = mesh.positions[v as usize];
-                    let c = &atlas.charts[atlas.chart_of[p as usize] as usize];
-                    let d = x - c.origin;
+                    let q = atlas.frames[p as usize].at(x);
                     let (u, w) = atlas.uv(p, x);
-                    ([d.dot(c.u) as f32, d.dot(c.v) as f32], [u as f32, w as f32])
+                    ([q.x as f32, q.y as f32], [u as f32, w as f32])
                 })
                 .unzip();
             let vec2 = json::accessor::Type::Vec2;

@@ -114,8 +114,7 @@ pub fn render(
                 if e == u32::MAX {
                     continue;
                 }
-                let c = chart[y * n + x] as usize;
-                let p = atlas.world(c, x as f64 + 0.5, y as f64 + 0.5);
+                let p = atlas.world(mesh.elements[e as usize].patch, x as f64 + 0.5, y as f64 + 0.5);
                 let mut rng = rng_for(opts.seed, (y * n + x) as u64);
                 shader.draw(1, &mut rng, &mut pat);
                 let (l, r) = shader.shade(e, p, 0, atlas.texel * atlas.texel, &mut pat);
