@@ -12,6 +12,7 @@ mod plot;
 mod progress;
 mod render;
 mod solve;
+mod thermal;
 mod viewfactors;
 
 use std::process::ExitCode;
@@ -39,6 +40,9 @@ enum Command {
     Compare(compare::CompareArgs),
     /// Compute a view-factor matrix (CSV, NumPy .npy, JSON or View3D text) with diagnostics.
     Viewfactors(viewfactors::ViewfactorsArgs),
+    /// Net radiative heat exchange between grey surfaces at given temperatures or heat
+    /// fluxes: per surface T, q, Q, J, G and the heat balance.
+    Thermal(thermal::ThermalArgs),
     /// Benchmarks (`bench rays`: BVH throughput on incoherent rays, against Embree with
     /// `--features embree`).
     Bench(bench::BenchArgs),
@@ -53,6 +57,7 @@ fn main() -> ExitCode {
         Command::Bake(a) => bake::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Viewfactors(a) => viewfactors::run(a),
+        Command::Thermal(a) => thermal::run(a),
         Command::Bench(a) => bench::run(a),
     };
     match result {

@@ -38,6 +38,7 @@ pub mod sampling;
 pub mod scene;
 pub mod sky;
 pub mod solve;
+pub mod thermal;
 pub mod transport;
 pub mod view_factors;
 

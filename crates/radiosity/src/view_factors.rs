@@ -186,6 +186,17 @@ impl Job {
         self.output.is_empty()
     }
 
+    /// The meshed scene.
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+
+    /// Per element: the mesh element of each output row (per object: the first element
+    /// of each row's group is not meaningful; use with [`Per::Element`]).
+    pub fn output_elements(&self) -> Vec<u32> {
+        self.output.iter().map(|&g| g as u32).collect()
+    }
+
     /// Output names.
     pub fn names(&self) -> Vec<String> {
         self.output.iter().map(|&g| self.groups.names[g].clone()).collect()

@@ -528,7 +528,8 @@ fn pack(rects: &[(usize, usize)], size: usize) -> Option<Vec<(usize, usize)>> {
     if rects.iter().any(|&(w, h)| w > size || h > size) {
         return None;
     }
-    let keys: [fn(&(usize, usize)) -> (usize, usize); 3] =
+    type SortKey = fn(&(usize, usize)) -> (usize, usize);
+    let keys: [SortKey; 3] =
         [|r| (r.1, r.0), |r| (r.0 * r.1, r.1), |r| (r.0.max(r.1), r.0.min(r.1))];
     'order: for key in keys {
         let mut order: Vec<usize> = (0..rects.len()).collect();

@@ -60,6 +60,7 @@ pub fn furnace(reflectance: f64, radiance: f64) -> SceneDesc {
     d.materials.push(MaterialDesc {
         base_texture: None,
         emission_texture: None,
+        thermal: None,
         name: "furnace".into(),
         reflectance: Rgb::splat(reflectance),
         emission: Rgb::splat(radiance),

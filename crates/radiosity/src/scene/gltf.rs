@@ -752,7 +752,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             .map(|s| f64::from(s.emissive_strength.0))
             .unwrap_or(1.0);
         let emission = Rgb::new(e[0].into(), e[1].into(), e[2].into()) * strength;
-        Ok(MaterialDesc { name, reflectance, emission, two_sided: m.double_sided.then_some(true), loc: Some(loc), base_texture, emission_texture })
+        Ok(MaterialDesc { name, reflectance, emission, two_sided: m.double_sided.then_some(true), loc: Some(loc), base_texture, emission_texture, thermal: None })
     }
 
     /// The texture-coordinate sets material `mi`'s textures read (from the raw JSON:

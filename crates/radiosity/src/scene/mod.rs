@@ -157,12 +157,43 @@ pub struct MaterialDesc {
     pub base_texture: Option<TextureRef>,
     /// A texture that multiplies `emission` (glTF `emissiveTexture`, MTL `map_Ke`).
     pub emission_texture: Option<TextureRef>,
+    /// Thermal properties (TOML `emissivity`, `temperature`, `heat_flux`, `adiabatic`).
+    pub thermal: Option<ThermalDesc>,
+}
+
+/// Thermal properties of a material as written ([`crate::thermal`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ThermalDesc {
+    /// Hemispherical emissivity ε in [0, 1] (None: 1 − the mean reflectance).
+    pub emissivity: Option<f64>,
+    /// The boundary condition (None: the material takes no part in a thermal solve).
+    pub boundary: Option<Boundary>,
+}
+
+/// A thermal boundary condition of a surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Boundary {
+    /// Given temperature, kelvin.
+    Temperature(f64),
+    /// Given net radiative heat flux leaving the surface, W per unit area (uniform).
+    HeatFlux(f64),
+    /// No net heat: a re-radiating surface.
+    Adiabatic,
+}
+
+/// A validated thermal specification: emissivity and boundary condition.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThermalSpec {
+    /// Emissivity ε in [0, 1].
+    pub emissivity: f64,
+    /// The boundary condition.
+    pub boundary: Boundary,
 }
 
 impl MaterialDesc {
     /// A non-emitting material.
     pub fn diffuse(name: &str, reflectance: Rgb) -> Self {
-        MaterialDesc { name: name.into(), reflectance, emission: Rgb::ZERO, two_sided: None, loc: None, base_texture: None, emission_texture: None }
+        MaterialDesc { name: name.into(), reflectance, emission: Rgb::ZERO, two_sided: None, loc: None, base_texture: None, emission_texture: None, thermal: None }
     }
 }
 
@@ -354,6 +385,8 @@ pub struct Material {
     pub base_texture: Option<(TextureRef, Rgb)>,
     /// The emission texture and its factor.
     pub emission_texture: Option<(TextureRef, Rgb)>,
+    /// Emissivity and boundary condition for [`crate::thermal`] (None: none given).
+    pub thermal: Option<ThermalSpec>,
 }
 
 impl Material {

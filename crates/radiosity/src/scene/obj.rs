@@ -374,6 +374,7 @@ pub fn parse_mtl_maps(text: &str, file: &Path) -> Result<(Vec<MaterialDesc>, Vec
             mats.push(MaterialDesc {
                 base_texture: None,
                 emission_texture: None,
+                thermal: None,
                 name: rest.join(" "),
                 reflectance: Rgb::ZERO,
                 emission: Rgb::ZERO,

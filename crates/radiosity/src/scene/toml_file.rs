@@ -18,6 +18,10 @@
 //! two_sided = false            # this material's choice wins over the scene's (and over
 //!                              # --two-sided): a lamp stays one-sided in a two-sided room
 //!
+//! # Thermal (`radiosity thermal`; see crate::thermal), per material:
+//! # emissivity = 0.8           # hemispherical ε in [0, 1] (default 1 − mean reflectance)
+//! # temperature = 500          # kelvin; or heat_flux = 1000 (W/m² leaving); or adiabatic = true
+//!
 //! [sky]                        # optional: a uniform sky around the geometry
 //! radiance = 1.0               # radiance of every direction that sees no polygon
 //!                              # (one value or [r, g, b]; same units as emission)
@@ -157,6 +161,10 @@ struct MaterialToml {
     reflectance: Option<Spanned<[f64; 3]>>,
     emission: Option<Spanned<[f64; 3]>>,
     two_sided: Option<bool>,
+    emissivity: Option<f64>,
+    temperature: Option<f64>,
+    heat_flux: Option<f64>,
+    adiabatic: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -372,10 +380,31 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
             }
             None => None,
         };
+        // Thermal: at most one boundary condition; values checked by validation.
+        let given: Vec<super::Boundary> = [
+            ov.temperature.map(super::Boundary::Temperature),
+            ov.heat_flux.map(super::Boundary::HeatFlux),
+            ov.adiabatic.filter(|a| *a).map(|_| super::Boundary::Adiabatic),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        if given.len() > 1 {
+            return Err(Error::input(
+                loc,
+                format!("[materials.{name}]: give one of temperature, heat_flux and adiabatic = true, not several"),
+            ));
+        }
+        let thermal = (ov.emissivity.is_some() || !given.is_empty())
+            .then(|| super::ThermalDesc { emissivity: ov.emissivity, boundary: given.first().copied() });
         let mut found = false;
         for (i, m) in desc.materials.iter_mut().enumerate().filter(|(_, m)| &m.name == name) {
             found = true;
             apply(m, reflectance, emission, ov.two_sided, &loc);
+            if thermal.is_some() {
+                m.thermal = thermal;
+                m.loc = Some(loc.clone());
+            }
             if reflectance.is_some() {
                 from_gltf[i] = false;
             }
@@ -482,6 +511,7 @@ fn add_light(desc: &mut SceneDesc, k: usize, l: &Spanned<LightToml>, at: &dyn Fn
             desc.materials.push(MaterialDesc {
                 base_texture: None,
                 emission_texture: None,
+                thermal: None,
                 name: format!("light:{name}"),
                 reflectance: Rgb::ZERO,
                 emission: rgb(&t.radiance, "radiance")?,

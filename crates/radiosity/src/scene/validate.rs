@@ -4,6 +4,7 @@ use std::collections::HashMap;
 
 use glam::{DVec2, DVec3};
 
+use super::{Boundary, ThermalDesc, ThermalSpec};
 use super::{Material, Object, Polygon, Scene, SceneDesc, MAX_COORDINATE, MAX_EMISSION, MAX_POLYGON_VERTICES, MAX_REFLECTANCE};
 use crate::{Error, Location, Result, Warning};
 
@@ -103,7 +104,29 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             Some((r, f)) => textures[r.texture as usize].mean * *f,
             None => c,
         };
+        let thermal = match m.thermal {
+            Some(ThermalDesc { emissivity, boundary: Some(boundary) }) => {
+                let eps = emissivity.unwrap_or_else(|| 1.0 - (reflectance.x + reflectance.y + reflectance.z) / 3.0);
+                let bad = |msg: String| Error::input(here(&m.loc), format!("material '{}': {msg}", m.name));
+                if !(0.0..=1.0).contains(&eps) {
+                    return Err(bad(format!("emissivity {eps} must be between 0 and 1")));
+                }
+                match boundary {
+                    Boundary::Temperature(t) if !(t.is_finite() && t >= 0.0) => {
+                        return Err(bad(format!("temperature {t} K must be finite and ≥ 0 (kelvin)")))
+                    }
+                    Boundary::HeatFlux(q) if !q.is_finite() => return Err(bad(format!("heat flux {q} must be finite"))),
+                    Boundary::HeatFlux(q) if q != 0.0 && eps <= 0.0 => {
+                        return Err(bad("a surface of emissivity 0 cannot emit or absorb a heat flux".into()))
+                    }
+                    _ => {}
+                }
+                Some(ThermalSpec { emissivity: eps, boundary })
+            }
+            _ => None,
+        };
         mats.push(Material {
+            thermal,
             name: m.name.clone(),
             reflectance: mean(&base_texture, reflectance).min(crate::Rgb::splat(MAX_REFLECTANCE)),
             emission: mean(&emission_texture, m.emission),

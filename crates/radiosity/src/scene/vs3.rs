@@ -198,6 +198,7 @@ pub fn parse_vs3(text: &str, path: &Path) -> Result<(SceneDesc, Vs3Control)> {
         desc.materials.push(MaterialDesc {
             base_texture: None,
             emission_texture: None,
+            thermal: None,
             name: s.name.clone(),
             reflectance: Rgb::splat(rho),
             emission: Rgb::ZERO,

@@ -1,0 +1,147 @@
+//! `radiosity thermal`: net radiative heat exchange between grey surfaces at given
+//! temperatures or heat fluxes (the net-radiation method on our view factors; see
+//! `radiosity::thermal`). Boundary conditions come from the scene's materials (TOML
+//! `[materials.NAME]` `emissivity`, `temperature`, `heat_flux`, `adiabatic`); the table
+//! goes to the terminal, `-o FILE.csv` / `--json FILE` write it.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{bail, Result};
+use clap::Args;
+use radiosity::form_factor;
+use radiosity::scene::{self, Scene};
+use radiosity::thermal::{solve, Settings};
+use radiosity::view_factors::{Per, Settings as VfSettings};
+
+use crate::common::FormFactorTuning;
+use crate::progress::CliProgress;
+
+/// Flags of `radiosity thermal`.
+#[derive(Args, Debug)]
+pub struct ThermalArgs {
+    /// Scene: a TOML file whose materials give emissivity and temperature, heat_flux or
+    /// adiabatic (or a mesh file whose materials carry them).
+    pub scene: String,
+    /// Temperature of the environment that receives what leaves the geometry, kelvin.
+    #[arg(long, value_name = "K", default_value_t = 0.0)]
+    pub environment: f64,
+    /// Form-factor method: hemicube, analytic, point-sampled, monte-carlo, adaptive.
+    #[arg(long, value_name = "METHOD", default_value = "point-sampled")]
+    pub method: String,
+    /// Element size in scene units; 0 = the input polygons [default: scene diagonal / 40].
+    #[arg(long, value_name = "S")]
+    pub mesh_size: Option<f64>,
+    /// Enforce reciprocity and closure of the view factors (closed geometry only): the
+    /// heat balance then closes to rounding.
+    #[arg(long)]
+    pub enclosure: bool,
+    /// Treat every surface as two-sided (each side its own surface).
+    #[arg(long)]
+    pub two_sided: bool,
+    /// Point-sampled: visibility rays per receiver point (n × n).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub visibility_samples: usize,
+    #[command(flatten)]
+    pub ff: FormFactorTuning,
+    /// Seed for every random choice.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Worker threads, 1 to 1024 [default: all cores].
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    /// Write the table as CSV here.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: Option<PathBuf>,
+    /// Write the table and the balance as JSON here.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// No progress bars or messages (errors and warnings still print).
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+pub fn run(a: ThermalArgs) -> Result<ExitCode> {
+    let t0 = Instant::now();
+    let method: form_factor::Method = a.method.parse()?;
+    if let Some(s) = a.mesh_size {
+        if !(s.is_finite() && s >= 0.0) {
+            bail!("--mesh-size must be a non-negative number, got {s}");
+        }
+    }
+    let ff = a.ff.options(method, a.seed, a.visibility_samples)?;
+    let mut outputs = crate::common::Outputs::default();
+    if let Some(p) = &a.output {
+        outputs.add("-o", p);
+    }
+    if let Some(p) = &a.json {
+        outputs.add("--json", p);
+    }
+    outputs.check()?;
+    crate::common::init_threads(a.threads)?;
+    let mut desc = scene::load(&a.scene)?;
+    desc.two_sided |= a.two_sided;
+    let scene = Scene::from_desc(desc)?;
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    let settings = Settings {
+        view_factors: VfSettings {
+            per: Per::Element,
+            mesh_size: a.mesh_size,
+            form_factors: ff,
+            enclosure: a.enclosure,
+        },
+        environment: a.environment,
+    };
+    let progress = CliProgress::new(a.quiet);
+    let th = solve(scene, &settings, &progress)?;
+    println!(
+        "{:<24} {:>10} {:>10} {:>6} {:>10} {:>12} {:>12} {:>12} {:>12}",
+        "surface", "condition", "area", "eps", "T [K]", "q [W/m2]", "Q [W]", "J [W/m2]", "G [W/m2]"
+    );
+    for s in &th.surfaces {
+        println!(
+            "{:<24} {:>10} {:>10.4e} {:>6.3} {:>10.3} {:>12.5e} {:>12.5e} {:>12.5e} {:>12.5e}",
+            s.name, s.boundary, s.area, s.emissivity, s.temperature, s.heat_flux, s.heat, s.radiosity, s.irradiance
+        );
+    }
+    println!(
+        "environment at {} K receives {:.5e} W; balance ΣQ − Q_env = {:.3e} W ({:.1e} of Σ|Q|); {} elements, {:.2} s",
+        a.environment,
+        th.environment_heat,
+        th.balance,
+        if th.total > 0.0 { th.balance.abs() / th.total } else { 0.0 },
+        th.elements,
+        t0.elapsed().as_secs_f64()
+    );
+    if let Some(p) = &a.output {
+        let mut s =
+            String::from("surface,condition,area,emissivity,temperature_K,heat_flux,heat_W,radiosity,irradiance\n");
+        for r in &th.surfaces {
+            s += &format!(
+                "\"{}\",{},{:e},{},{},{:e},{:e},{:e},{:e}\n",
+                r.name.replace('"', "\"\""),
+                r.boundary,
+                r.area,
+                r.emissivity,
+                r.temperature,
+                r.heat_flux,
+                r.heat,
+                r.radiosity,
+                r.irradiance
+            );
+        }
+        crate::common::write_atomic(p, s.as_bytes())?;
+    }
+    if let Some(p) = &a.json {
+        let v = serde_json::json!({
+            "surfaces": th.surfaces, "environment_K": a.environment, "environment_heat_W": th.environment_heat,
+            "balance_W": th.balance, "total_W": th.total, "elements": th.elements,
+            "view_factors": th.diagnostics, "enclosure": th.enclosure,
+        });
+        crate::common::write_atomic(p, serde_json::to_string_pretty(&v)?.as_bytes())?;
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,266 @@
+//! Radiative heat transfer between grey, diffuse, opaque surfaces: the net-radiation method
+//! (Hottel & Sarofim 1967; Modest, *Radiative Heat Transfer*, ch. 5) on our view factors.
+//!
+//! Every element `i` of a surface with emissivity `εᵢ` leaves with radiosity
+//! `Jᵢ = εᵢσTᵢ⁴ + (1 − εᵢ)Gᵢ` and receives the irradiance
+//! `Gᵢ = Σⱼ Fᵢⱼ Jⱼ + Fᵢ,env σT_env⁴`, where `Fᵢ,env = 1 − Σⱼ Fᵢⱼ` is what leaves the
+//! geometry (an environment — the sky, deep space, a hall — at `T_env` takes the rest of each
+//! row; 0 for a closed enclosure). Its net radiative flux is `qᵢ = Jᵢ − Gᵢ` (W/m², positive
+//! when the surface loses heat). A boundary condition per surface closes the system:
+//!
+//! - temperature `T`: `Jᵢ − (1 − εᵢ) Σⱼ Fᵢⱼ Jⱼ = εᵢσTᵢ⁴ + (1 − εᵢ)Fᵢ,env σT_env⁴`;
+//! - net heat flux `q` (W/m², uniform over the surface): `Jᵢ − Σⱼ Fᵢⱼ Jⱼ = q + Fᵢ,env σT_env⁴`,
+//!   and afterwards `σTᵢ⁴ = (Jᵢ − (1 − εᵢ)Gᵢ)/εᵢ`;
+//! - adiabatic (re-radiating): `q = 0`.
+//!
+//! The system (one unknown `J` per element, dense) is solved by LU factorisation. Results
+//! are reported per input object (surface): area, ε, T (for flux surfaces the
+//! area-weighted mean of T⁴, to the ¼), q = Q/A, Q = Σ qᵢAᵢ, and the area means of J and G;
+//! the balance ΣQ − Q_env is zero for reciprocal view factors (exactly, to rounding, with
+//! the enclosure correction of a closed geometry, `--enclosure`).
+//!
+//! Units: SI — temperatures in kelvin, lengths in metres (a scene in other units gives
+//! fluxes per its unit²: scale Q accordingly).
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::lu::partial_pivoting::{factor, solve as lu_solve};
+use faer::{Mat, Par};
+
+use crate::form_factor::diagnostics::Diagnostics;
+use crate::form_factor::enclosure::EnclosureReport;
+use crate::scene::{Boundary, Scene};
+use crate::view_factors::{Job, Per, Settings as VfSettings};
+use crate::{Error, Progress, Result};
+
+/// The Stefan–Boltzmann constant σ, W/(m²·K⁴) (CODATA 2018, exact in the SI).
+pub const STEFAN_BOLTZMANN: f64 = 5.670_374_419e-8;
+
+/// Most elements of the dense system (its LU factorisation takes `n³/3` operations).
+pub const MAX_ELEMENTS: usize = 20_000;
+
+/// What decides a thermal solution.
+#[derive(Clone, Debug)]
+pub struct Settings {
+    /// View factors (their `per` is ignored: the system is solved per element).
+    pub view_factors: VfSettings,
+    /// Temperature of the environment that takes the rest of each row, kelvin.
+    pub environment: f64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings { view_factors: VfSettings { per: Per::Element, ..Default::default() }, environment: 0.0 }
+    }
+}
+
+/// One surface's result.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SurfaceResult {
+    /// Object name (`name (back)` for the back side of a two-sided surface).
+    pub name: String,
+    /// What was given: "temperature", "heat flux" or "adiabatic".
+    pub boundary: &'static str,
+    /// Area, scene units².
+    pub area: f64,
+    /// Emissivity (area mean over the surface's elements).
+    pub emissivity: f64,
+    /// Temperature, K (given, or solved for flux and adiabatic surfaces).
+    pub temperature: f64,
+    /// Net radiative heat flux leaving, W per unit area (Q/A).
+    pub heat_flux: f64,
+    /// Net radiative heat leaving, W.
+    pub heat: f64,
+    /// Area-mean radiosity J, W per unit area.
+    pub radiosity: f64,
+    /// Area-mean irradiance G, W per unit area.
+    pub irradiance: f64,
+}
+
+/// A solved enclosure.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Thermal {
+    /// Per surface, in object order.
+    pub surfaces: Vec<SurfaceResult>,
+    /// Net heat the environment receives, W (zero for a closed geometry).
+    pub environment_heat: f64,
+    /// ΣQ − Q_env, W: zero when energy is conserved.
+    pub balance: f64,
+    /// Σ|Q| + |Q_env|, W: the scale of `balance`.
+    pub total: f64,
+    /// Elements of the system.
+    pub elements: usize,
+    /// The view factors' diagnostics (row sums, reciprocity).
+    #[serde(skip)]
+    pub diagnostics: Diagnostics,
+    /// The enclosure correction, when applied.
+    #[serde(skip)]
+    pub enclosure: Option<EnclosureReport>,
+}
+
+/// Solves the grey-body exchange of `scene`: every non-obstruction surface needs a
+/// boundary condition ([`crate::scene::Material::thermal`]).
+pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Thermal> {
+    let sigma = STEFAN_BOLTZMANN;
+    if !(settings.environment.is_finite() && settings.environment >= 0.0) {
+        return Err(Error::Invalid(format!(
+            "environment temperature {} K must be finite and ≥ 0",
+            settings.environment
+        )));
+    }
+    // Every material used by a surface needs a boundary condition.
+    let mut missing: Vec<String> = Vec::new();
+    for p in &scene.polygons {
+        let m = &scene.materials[p.material as usize];
+        if m.thermal.is_none() && !scene.is_obstruction(p.object) && !missing.contains(&m.name) {
+            missing.push(m.name.clone());
+        }
+    }
+    if !missing.is_empty() {
+        return Err(Error::Invalid(format!(
+            "no thermal boundary condition for material(s) {}: give each a temperature, heat_flux or adiabatic = true \
+             (TOML [materials.NAME])",
+            missing.iter().map(|m| format!("'{m}'")).collect::<Vec<_>>().join(", ")
+        )));
+    }
+    let vf = VfSettings { per: Per::Element, ..settings.view_factors.clone() };
+    let job = Job::new(scene, vf)?;
+    let n = job.len();
+    if n > MAX_ELEMENTS {
+        return Err(Error::Invalid(format!(
+            "{n} elements: the dense thermal system holds at most {MAX_ELEMENTS}; raise --mesh-size"
+        )));
+    }
+    let elements = job.output_elements();
+    let vfs = job.compute(None, progress)?;
+    let scene = job.scene();
+    let mesh = job.mesh();
+    let f = &vfs.matrix;
+    let env = sigma * settings.environment.powi(4);
+    // Per element: emissivity, coefficient of Σ F J, right-hand side.
+    let mut eps = vec![0.0; n];
+    let mut coef = vec![0.0; n];
+    let mut rhs = vec![0.0; n];
+    let mut f_env = vec![0.0; n];
+    for (r, &e) in elements.iter().enumerate() {
+        let p = &scene.polygons[mesh.elements[e as usize].patch as usize];
+        let m = &scene.materials[p.material as usize];
+        let spec = m.thermal.as_ref().ok_or_else(|| Error::Invalid("missing boundary condition".into()))?;
+        let rowsum: f64 = f.row(r).iter().sum();
+        f_env[r] = (1.0 - rowsum).max(0.0);
+        eps[r] = spec.emissivity;
+        match spec.boundary {
+            Boundary::Temperature(t) => {
+                coef[r] = 1.0 - spec.emissivity;
+                rhs[r] = spec.emissivity * sigma * t.powi(4) + (1.0 - spec.emissivity) * f_env[r] * env;
+            }
+            Boundary::HeatFlux(q) => {
+                coef[r] = 1.0;
+                rhs[r] = q + f_env[r] * env;
+            }
+            Boundary::Adiabatic => {
+                coef[r] = 1.0;
+                rhs[r] = f_env[r] * env;
+            }
+        }
+    }
+    // Without a temperature anywhere, only the environment can fix the level of J.
+    let any_t = elements.iter().any(|&e| {
+        let p = &scene.polygons[mesh.elements[e as usize].patch as usize];
+        matches!(scene.materials[p.material as usize].thermal.map(|t| t.boundary), Some(Boundary::Temperature(_)))
+    });
+    let open: f64 = elements.iter().zip(&f_env).map(|(&e, fe)| mesh.elements[e as usize].area * fe).sum();
+    let area: f64 = elements.iter().map(|&e| mesh.elements[e as usize].area).sum();
+    if !any_t && open <= 1e-9 * area {
+        return Err(Error::Invalid(
+            "no surface has a temperature and the geometry is closed: with only heat-flux and adiabatic surfaces the \
+             temperatures are undetermined; give at least one surface a temperature"
+                .into(),
+        ));
+    }
+    // A J = b with A = I − diag(coef) F.
+    let par = if rayon::current_num_threads() > 1 { Par::rayon(0) } else { Par::Seq };
+    let mut a = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - coef[i] * f.get(i, j));
+    let mut perm = vec![0usize; n];
+    let mut perm_inv = vec![0usize; n];
+    let scratch = factor::lu_in_place_scratch::<usize, f64>(n, n, par, Default::default())
+        .or(lu_solve::solve_in_place_scratch::<usize, f64>(n, 1, par));
+    let mut mem = MemBuffer::new(scratch);
+    let (_, pm) =
+        factor::lu_in_place(a.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut mem), Default::default());
+    let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
+    lu_solve::solve_in_place(a.as_ref(), a.as_ref(), pm, x.as_mut(), par, MemStack::new(&mut mem));
+    drop(a);
+    let j: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
+    if j.iter().any(|v| !v.is_finite()) {
+        return Err(Error::Invalid(
+            "the thermal system is singular: with only heat-flux and adiabatic surfaces in a closed enclosure the \
+             temperatures are undetermined; give at least one surface a temperature"
+                .into(),
+        ));
+    }
+    // Per surface (object and side).
+    let mut order: Vec<(u32, bool)> = Vec::new();
+    let mut acc: std::collections::HashMap<(u32, bool), [f64; 7]> = std::collections::HashMap::new();
+    let mut q_env = 0.0;
+    for (r, &e) in elements.iter().enumerate() {
+        let el = &mesh.elements[e as usize];
+        let p = &scene.polygons[el.patch as usize];
+        let m = &scene.materials[p.material as usize];
+        let g: f64 = f.row(r).iter().zip(&j).map(|(fv, jv)| fv * jv).sum::<f64>() + f_env[r] * env;
+        let q = j[r] - g;
+        let t4 = match m.thermal.as_ref().map(|s| s.boundary) {
+            Some(Boundary::Temperature(t)) => t.powi(4),
+            _ if eps[r] > 0.0 => ((j[r] - (1.0 - eps[r]) * g) / (eps[r] * sigma)).max(0.0),
+            _ => f64::NAN,
+        };
+        let a = el.area;
+        q_env += a * f_env[r] * (j[r] - env);
+        let key = (p.object, p.back_side);
+        let s = acc.entry(key).or_insert_with(|| {
+            order.push(key);
+            [0.0; 7]
+        });
+        s[0] += a;
+        s[1] += a * eps[r];
+        s[2] += a * t4;
+        s[3] += a * q;
+        s[4] += a * j[r];
+        s[5] += a * g;
+        s[6] = match m.thermal.as_ref().map(|s| s.boundary) {
+            Some(Boundary::Temperature(_)) => 0.0,
+            Some(Boundary::HeatFlux(_)) => 1.0,
+            _ => 2.0,
+        };
+    }
+    order.sort();
+    let two_sided = scene.polygons.iter().any(|p| p.back_side);
+    let surfaces: Vec<SurfaceResult> = order
+        .iter()
+        .map(|key| {
+            let s = acc[key];
+            let name = &scene.objects[key.0 as usize].name;
+            SurfaceResult {
+                name: if two_sided && key.1 { format!("{name} (back)") } else { name.clone() },
+                boundary: ["temperature", "heat flux", "adiabatic"][s[6] as usize],
+                area: s[0],
+                emissivity: s[1] / s[0],
+                temperature: (s[2] / s[0]).powf(0.25),
+                heat_flux: s[3] / s[0],
+                heat: s[3],
+                radiosity: s[4] / s[0],
+                irradiance: s[5] / s[0],
+            }
+        })
+        .collect();
+    let sum_q: f64 = surfaces.iter().map(|s| s.heat).sum();
+    let total: f64 = surfaces.iter().map(|s| s.heat.abs()).sum::<f64>() + q_env.abs();
+    Ok(Thermal {
+        surfaces,
+        environment_heat: q_env,
+        balance: sum_q - q_env,
+        total,
+        elements: n,
+        diagnostics: vfs.diagnostics,
+        enclosure: vfs.enclosure,
+    })
+}

@@ -1,0 +1,305 @@
+//! Grey-body radiative exchange (`radiosity::thermal`): closed forms that could fail.
+//!
+//! - Concentric spheres: Q = σA₁(T₁⁴ − T₂⁴)/[1/ε₁ + (A₁/A₂)(1/ε₂ − 1)], tessellated and
+//!   converging as the tessellation is refined (A₁, A₂ the tessellated areas).
+//! - Concentric cylinders, the inner one capped, the outer one closed by end disks that
+//!   belong to it: the same formula with the cylinders' areas (exact for a convex inner
+//!   body under a black outer one; for a grey outer one the two-surface formula assumes a
+//!   uniform radiosity, which a finite cylinder only approaches).
+//! - Every closed case balances: |ΣQ| ≤ 1e-9 Σ|Q|; heat-flux and adiabatic surfaces get
+//!   the temperature that carries their flux.
+
+use glam::DVec3;
+use radiosity::scene::{Boundary, MaterialDesc, ObjectDesc, PolygonDesc, Scene, SceneDesc, ThermalDesc};
+use radiosity::thermal::{solve, Settings, Thermal, STEFAN_BOLTZMANN as SIGMA};
+use radiosity::view_factors::{Per, Settings as VfSettings};
+use radiosity::{NoProgress, Rgb};
+
+/// Triangles of an icosphere of radius `r` (`level` subdivisions), counter-clockwise seen
+/// from outside; `inward` reverses them.
+fn icosphere(r: f64, level: u32, inward: bool) -> Vec<Vec<DVec3>> {
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let v = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .map(|(x, y, z)| DVec3::new(x, y, z).normalize());
+    let f = [
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    let mut tris: Vec<[DVec3; 3]> = f.iter().map(|t| [v[t[0]], v[t[1]], v[t[2]]]).collect();
+    for _ in 0..level {
+        let mut next = Vec::with_capacity(tris.len() * 4);
+        for [a, b, c] in tris {
+            let (ab, bc, ca) = ((a + b).normalize(), (b + c).normalize(), (c + a).normalize());
+            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        tris = next;
+    }
+    tris.into_iter()
+        .map(|t| {
+            let mut p: Vec<DVec3> = t.iter().map(|x| *x * r).collect();
+            if inward {
+                p.reverse();
+            }
+            p
+        })
+        .collect()
+}
+
+fn material(name: &str, eps: f64, boundary: Boundary) -> MaterialDesc {
+    MaterialDesc {
+        thermal: Some(ThermalDesc { emissivity: Some(eps), boundary: Some(boundary) }),
+        ..MaterialDesc::diffuse(name, Rgb::splat(1.0 - eps))
+    }
+}
+
+fn scene(parts: Vec<(&str, MaterialDesc, Vec<Vec<DVec3>>)>) -> Scene {
+    let mut d = SceneDesc { name: "thermal".into(), ..Default::default() };
+    for (k, (name, m, polys)) in parts.into_iter().enumerate() {
+        d.materials.push(m);
+        d.objects.push(ObjectDesc { name: name.into(), loc: None });
+        for v in polys {
+            d.polygons.push(PolygonDesc {
+                uvs: Vec::new(),
+                vertices: v,
+                material: k as u32,
+                object: k as u32,
+                loc: None,
+            });
+        }
+    }
+    Scene::from_desc(d).unwrap()
+}
+
+/// Point-sampled factors (with occlusion) between the input polygons, closed by the
+/// enclosure correction when asked.
+fn run(s: Scene, enclosure: bool) -> Thermal {
+    let mut vf = VfSettings { per: Per::Element, mesh_size: Some(0.0), enclosure, ..Default::default() };
+    vf.form_factors.method = radiosity::form_factor::Method::PointSampled;
+    solve(s, &Settings { view_factors: vf, environment: 0.0 }, &NoProgress).unwrap()
+}
+
+fn two_surface(a1: f64, a2: f64, e1: f64, e2: f64, t1: f64, t2: f64) -> f64 {
+    SIGMA * a1 * (t1.powi(4) - t2.powi(4)) / (1.0 / e1 + (a1 / a2) * (1.0 / e2 - 1.0))
+}
+
+fn check_balance(th: &Thermal) {
+    assert!(th.balance.abs() <= 1e-9 * th.total, "ΣQ − Q_env = {} of Σ|Q| {}", th.balance, th.total);
+}
+
+#[test]
+fn concentric_spheres_match_the_closed_form_and_converge() {
+    let (r1, r2, e1, e2, t1, t2) = (0.5, 1.0, 0.6, 0.3, 800.0, 300.0);
+    let mut errs = Vec::new();
+    for level in [1, 2, 3] {
+        let s = scene(vec![
+            ("inner", material("hot", e1, Boundary::Temperature(t1)), icosphere(r1, level, false)),
+            ("outer", material("cold", e2, Boundary::Temperature(t2)), icosphere(r2, level, true)),
+        ]);
+        let a1: f64 = s.polygons.iter().filter(|p| p.object == 0).map(|p| p.area).sum();
+        let a2: f64 = s.polygons.iter().filter(|p| p.object == 1).map(|p| p.area).sum();
+        let th = run(s, true);
+        check_balance(&th);
+        let exact = two_surface(a1, a2, e1, e2, t1, t2);
+        let q = th.surfaces[0].heat;
+        let err = (q - exact).abs() / exact;
+        eprintln!(
+            "spheres level {level}: {} elements, Q {q:.6e} W vs {exact:.6e} W ({:.4} %)",
+            th.elements,
+            100.0 * err
+        );
+        assert!((th.surfaces[1].heat + q).abs() <= 1e-9 * q.abs(), "outer absorbs what inner loses");
+        errs.push(err);
+    }
+    assert!(errs[2] <= 0.005, "level 3: {:.3} %", 100.0 * errs[2]);
+    assert!(errs[2] <= errs[0] + 1e-4, "no convergence: {errs:?}");
+}
+
+/// A cylinder of radius `r` from y = 0 to `len` as `n` quads around, with end disks (fans of
+/// `n` triangles) when `caps`; outward, or inward.
+fn cylinder(r: f64, len: f64, n: usize, caps: bool, inward: bool) -> Vec<Vec<DVec3>> {
+    let at = |k: usize, y: f64| {
+        let a = 2.0 * std::f64::consts::PI * (k % n) as f64 / n as f64;
+        DVec3::new(r * a.cos(), y, -r * a.sin())
+    };
+    let mut out = Vec::new();
+    // Rings along the axis so elements stay near square.
+    let rings = ((len / (2.0 * std::f64::consts::PI * r / n as f64)).round() as usize).max(1);
+    for k in 0..n {
+        for s in 0..rings {
+            let (y0, y1) = (len * s as f64 / rings as f64, len * (s + 1) as f64 / rings as f64);
+            out.push(vec![at(k, y0), at(k + 1, y0), at(k + 1, y1), at(k, y1)]);
+        }
+    }
+    if caps {
+        for k in 0..n {
+            out.push(vec![DVec3::new(0.0, len, 0.0), at(k, len), at(k + 1, len)].into_iter().rev().collect());
+            out.push(vec![DVec3::ZERO, at(k, 0.0), at(k + 1, 0.0)]);
+        }
+    }
+    // The side quads above face outward (counter-clockwise from outside), caps likewise.
+    for p in &mut out {
+        let nrm = radiosity::scene::newell_normal(p);
+        let c = p.iter().copied().sum::<DVec3>() / p.len() as f64;
+        let outward = nrm.dot(c - DVec3::new(0.0, len / 2.0, 0.0)) > 0.0;
+        if outward == inward {
+            p.reverse();
+        }
+    }
+    out
+}
+
+#[test]
+fn concentric_cylinders_match_the_closed_form() {
+    let (r1, r2, len, t1, t2) = (0.5, 1.0, 4.0, 600.0, 300.0);
+    for (e1, e2, tol) in [(0.5, 1.0, 0.005), (0.5, 0.8, 0.01)] {
+        let s = scene(vec![
+            ("inner", material("hot", e1, Boundary::Temperature(t1)), cylinder(r1, len, 32, true, false)),
+            ("outer", material("cold", e2, Boundary::Temperature(t2)), {
+                let mut o = cylinder(r2, len + 2.0, 48, true, true);
+                for p in &mut o {
+                    for v in p.iter_mut() {
+                        v.y -= 1.0;
+                    }
+                }
+                o
+            }),
+        ]);
+        let a1: f64 = s.polygons.iter().filter(|p| p.object == 0).map(|p| p.area).sum();
+        let a2: f64 = s.polygons.iter().filter(|p| p.object == 1).map(|p| p.area).sum();
+        let th = run(s, true);
+        check_balance(&th);
+        let exact = two_surface(a1, a2, e1, e2, t1, t2);
+        let q = th.surfaces[0].heat;
+        let err = (q - exact).abs() / exact;
+        eprintln!(
+            "cylinders ε {e1}/{e2}: {} elements, Q {q:.6e} W vs {exact:.6e} W ({:.4} %)",
+            th.elements,
+            100.0 * err
+        );
+        assert!(err <= tol, "ε {e1}/{e2}: {:.3} % (tolerance {:.1} %)", 100.0 * err, 100.0 * tol);
+    }
+}
+
+#[test]
+fn flux_and_adiabatic_surfaces_get_the_temperature_that_carries_their_flux() {
+    // Inner sphere given a heat flux: its temperature must be the one that, as a
+    // temperature condition, gives that flux back. An adiabatic middle shell between two
+    // spheres passes the heat on: Q through it equals the two-surface series resistance.
+    let (r1, r2, e1, e2, t2) = (0.5, 1.0, 0.7, 0.4, 300.0);
+    let q1 = 2000.0;
+    let s = scene(vec![
+        ("inner", material("source", e1, Boundary::HeatFlux(q1)), icosphere(r1, 3, false)),
+        ("outer", material("cold", e2, Boundary::Temperature(t2)), icosphere(r2, 3, true)),
+    ]);
+    let a1: f64 = s.polygons.iter().filter(|p| p.object == 0).map(|p| p.area).sum();
+    let a2: f64 = s.polygons.iter().filter(|p| p.object == 1).map(|p| p.area).sum();
+    let th = run(s, true);
+    check_balance(&th);
+    assert!((th.surfaces[0].heat_flux - q1).abs() < 1e-9 * q1, "{}", th.surfaces[0].heat_flux);
+    // Invert the closed form: T1⁴ = T2⁴ + Q [1/ε1 + (A1/A2)(1/ε2 − 1)]/(σ A1).
+    let t1 = (t2.powi(4) + q1 * a1 * (1.0 / e1 + (a1 / a2) * (1.0 / e2 - 1.0)) / (SIGMA * a1)).powf(0.25);
+    let got = th.surfaces[0].temperature;
+    assert!((got - t1).abs() <= 0.005 * (t1 - t2), "T1 {got} vs {t1}");
+    // A closed room of adiabatic walls around nothing but themselves is undetermined.
+    let s = scene(vec![("shell", material("re-radiating", 0.5, Boundary::Adiabatic), icosphere(1.0, 1, true))]);
+    let vf = VfSettings { per: Per::Element, mesh_size: Some(0.0), enclosure: true, ..Default::default() };
+    let e = solve(s, &Settings { view_factors: vf, environment: 0.0 }, &NoProgress);
+    assert!(e.is_err(), "an all-adiabatic enclosure must be refused");
+}
+
+#[test]
+fn a_material_without_a_boundary_condition_is_named() {
+    let mut m = MaterialDesc::diffuse("plain", Rgb::splat(0.5));
+    m.thermal = None;
+    let s = scene(vec![
+        ("inner", material("hot", 0.5, Boundary::Temperature(500.0)), icosphere(0.5, 1, false)),
+        ("outer", m, icosphere(1.0, 1, true)),
+    ]);
+    let e = solve(s, &Settings::default(), &NoProgress).unwrap_err().to_string();
+    assert!(e.contains("'plain'"), "{e}");
+}
+
+/// View factor between directly opposed unit squares a distance `c` apart (Howell C-11).
+fn parallel_squares(c: f64) -> f64 {
+    let (x, y) = (1.0 / c, 1.0 / c);
+    let (x2, y2) = (x * x, y * y);
+    2.0 / (std::f64::consts::PI * x * y)
+        * (((1.0 + x2) * (1.0 + y2) / (1.0 + x2 + y2)).sqrt().ln()
+            + x * (1.0 + y2).sqrt() * (x / (1.0 + y2).sqrt()).atan()
+            + y * (1.0 + x2).sqrt() * (y / (1.0 + x2).sqrt()).atan()
+            - x * x.atan()
+            - y * y.atan())
+}
+
+/// The three-surface enclosure with a re-radiating surface (scenes/thermal-box.toml: a hot
+/// floor, a cold ceiling, four adiabatic walls of a cube). With one element per surface the
+/// solve is the textbook network, Q = σ(T₁⁴ − T₂⁴)/[R₁ + 1/(A₁F₁₂ + 1/(1/(A₁F₁R) + 1/(A₂F₂R))) + R₂],
+/// Rᵢ = (1 − εᵢ)/(εᵢAᵢ), to rounding; refined, the walls' radiosity is no longer uniform
+/// (hot near the floor) and the heat moves away from the uniform-radiosity network, which
+/// the finer meshes must agree on among themselves.
+#[test]
+fn re_radiating_walls_match_the_three_surface_network() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/thermal-box.toml");
+    let (t1, t2, e1, e2): (f64, f64, f64, f64) = (600.0, 300.0, 0.8, 0.5);
+    let f12 = parallel_squares(1.0);
+    let (a1, a2) = (1.0, 1.0);
+    let r = (1.0 - e1) / (e1 * a1)
+        + 1.0 / (a1 * f12 + 1.0 / (1.0 / (a1 * (1.0 - f12)) + 1.0 / (a2 * (1.0 - f12))))
+        + (1.0 - e2) / (e2 * a2);
+    let exact = SIGMA * (t1.powi(4) - t2.powi(4)) / r;
+    let load = || radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    let mut vf = VfSettings { per: Per::Element, mesh_size: Some(0.0), enclosure: false, ..Default::default() };
+    vf.form_factors.method = radiosity::form_factor::Method::Analytic;
+    let th = solve(load(), &Settings { view_factors: vf, environment: 0.0 }, &NoProgress).unwrap();
+    check_balance(&th);
+    let q = th.surfaces.iter().find(|s| s.name == "floor").unwrap().heat;
+    assert!((q - exact).abs() <= 1e-6 * exact, "one element per surface: {q} vs the network's {exact}");
+    assert!(th.surfaces.iter().find(|s| s.name == "walls").unwrap().heat.abs() <= 1e-9 * exact);
+    // Refined: the answer converges (and leaves the uniform-radiosity network).
+    let mut qs = Vec::new();
+    for size in [0.1, 0.05] {
+        let s = load();
+        let th = run_sized(s, size);
+        check_balance(&th);
+        qs.push(th.surfaces.iter().find(|s| s.name == "floor").unwrap().heat);
+    }
+    eprintln!("three-surface network {exact:.5e} W; meshes 0.1 / 0.05: {:.5e} / {:.5e} W", qs[0], qs[1]);
+    assert!((qs[0] - qs[1]).abs() <= 0.005 * qs[1], "not converged: {qs:?}");
+}
+
+fn run_sized(s: Scene, size: f64) -> Thermal {
+    let mut vf = VfSettings { per: Per::Element, mesh_size: Some(size), enclosure: true, ..Default::default() };
+    vf.form_factors.method = radiosity::form_factor::Method::PointSampled;
+    solve(s, &Settings { view_factors: vf, environment: 0.0 }, &NoProgress).unwrap()
+}
