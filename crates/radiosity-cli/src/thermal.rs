@@ -11,8 +11,9 @@ use std::time::Instant;
 use anyhow::{bail, Result};
 use clap::Args;
 use radiosity::form_factor;
+use radiosity::output::matrix::{MatrixFormat, MatrixMeta, MatrixWriter};
 use radiosity::scene::{self, Scene};
-use radiosity::thermal::{solve, Settings};
+use radiosity::thermal::{exchange_factors, solve, Settings};
 use radiosity::view_factors::{Per, Settings as VfSettings};
 
 use crate::common::FormFactorTuning;
@@ -57,6 +58,13 @@ pub struct ThermalArgs {
     /// Write the table and the balance as JSON here.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// Write Gebhart's absorption factors B_IJ between surfaces here (format by extension:
+    /// .csv, .npy, .json, .txt/.vf), with each surface's share lost to the environment.
+    #[arg(long, value_name = "FILE")]
+    pub gebhart: Option<PathBuf>,
+    /// Write the radiative conductances GR_IJ = ε_I A_I B_IJ here (Q_IJ = σ GR_IJ (T_I⁴ − T_J⁴)).
+    #[arg(long, value_name = "FILE")]
+    pub conductances: Option<PathBuf>,
     /// No progress bars or messages (errors and warnings still print).
     #[arg(long, short)]
     pub quiet: bool,
@@ -78,6 +86,17 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
     if let Some(p) = &a.json {
         outputs.add("--json", p);
     }
+    if let Some(p) = &a.gebhart {
+        outputs.add("--gebhart", p);
+    }
+    if let Some(p) = &a.conductances {
+        outputs.add("--conductances", p);
+    }
+    for p in [&a.gebhart, &a.conductances].into_iter().flatten() {
+        if MatrixFormat::from_path(p).is_none() {
+            bail!("{}: cannot tell the format from the extension (use .csv, .npy, .json, .txt or .vf)", p.display());
+        }
+    }
     outputs.check()?;
     crate::common::init_threads(a.threads)?;
     let mut desc = scene::load(&a.scene)?;
@@ -96,6 +115,11 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
         environment: a.environment,
     };
     let progress = CliProgress::new(a.quiet);
+    let exchange = if a.gebhart.is_some() || a.conductances.is_some() {
+        Some(exchange_factors(scene.clone(), &settings, &progress)?)
+    } else {
+        None
+    };
     let th = solve(scene, &settings, &progress)?;
     println!(
         "{:<24} {:>10} {:>10} {:>6} {:>10} {:>12} {:>12} {:>12} {:>12}",
@@ -142,6 +166,40 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
             "view_factors": th.diagnostics, "enclosure": th.enclosure,
         });
         crate::common::write_atomic(p, serde_json::to_string_pretty(&v)?.as_bytes())?;
+    }
+    if let Some(x) = &exchange {
+        let n = x.names.len();
+        let meta = MatrixMeta {
+            title: &a.scene,
+            names: &x.names,
+            areas: &x.areas,
+            emissivity: &x.emissivity,
+            method: &a.method,
+            per: "object",
+            enclosure: a.enclosure,
+        };
+        let mut extra = serde_json::Map::new();
+        extra.insert("to_environment".into(), serde_json::json!(x.to_environment));
+        extra.insert("reciprocity".into(), serde_json::json!(x.reciprocity));
+        for (path, m) in [(&a.gebhart, &x.gebhart), (&a.conductances, &x.conductance)] {
+            let Some(p) = path else { continue };
+            let format = MatrixFormat::from_path(p).unwrap_or(MatrixFormat::Csv);
+            crate::common::write_atomic_with(p, |file| {
+                let mut w = MatrixWriter::begin(format, file, &meta)?;
+                for i in 0..n {
+                    w.row(&m[i * n..(i + 1) * n])?;
+                }
+                w.finish(&extra)?;
+                Ok(())
+            })?;
+        }
+        if !a.quiet {
+            eprintln!(
+                "exchange factors: {n} surfaces, largest reciprocity error of ε A B {:.1e}, rows lose {:.2e} at most to the environment",
+                x.reciprocity,
+                x.to_environment.iter().fold(0.0f64, |m, v| m.max(*v))
+            );
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -264,3 +264,119 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
         enclosure: vfs.enclosure,
     })
 }
+
+/// Exchange factors between surfaces (objects and sides), from the element solution of
+/// `Bᵢⱼ = Fᵢⱼ εⱼ + Σₖ Fᵢₖ (1 − εₖ) Bₖⱼ` — Gebhart's absorption factor: the share of the
+/// power emitted by `i` that `j` absorbs, directly and after any number of diffuse
+/// reflections. Per surface `B_IJ` is the emission-weighted mean over `I`'s elements,
+/// `GR_IJ = ε_I A_I B_IJ` the radiative conductance (ESATAN's REF, Thermal Desktop's RADK:
+/// `Q_IJ = σ GR_IJ (T_I⁴ − T_J⁴)`), and Hottel's total exchange area `A_I ℱ_IJ = GR_IJ`.
+#[derive(Clone, Debug)]
+pub struct Exchange {
+    /// Surface names (as [`SurfaceResult::name`]).
+    pub names: Vec<String>,
+    /// Areas.
+    pub areas: Vec<f64>,
+    /// Emissivities (area means).
+    pub emissivity: Vec<f64>,
+    /// Gebhart factors `B_IJ`, row-major `n × n`.
+    pub gebhart: Vec<f64>,
+    /// Share of each surface's emission absorbed by the environment (`1 − Σ_J B_IJ`).
+    pub to_environment: Vec<f64>,
+    /// Radiative conductances `GR_IJ = ε_I A_I B_IJ`, row-major (scene units²).
+    pub conductance: Vec<f64>,
+    /// Largest `|GR_IJ − GR_JI| / max(GR_IJ, GR_JI)` over pairs above 1e-12 of the largest.
+    pub reciprocity: f64,
+    /// Elements of the system.
+    pub elements: usize,
+}
+
+/// Gebhart factors and radiative conductances of `scene`'s surfaces (emissivity from the
+/// materials' thermal data, else `1 − ` mean reflectance; no boundary condition needed).
+pub fn exchange_factors(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Exchange> {
+    let vf = VfSettings { per: Per::Element, ..settings.view_factors.clone() };
+    let job = Job::new(scene, vf)?;
+    let n = job.len();
+    if n > MAX_ELEMENTS / 4 {
+        return Err(Error::Invalid(format!(
+            "{n} elements: Gebhart factors solve an n × n system with n right-hand sides, at most {} elements; \
+             raise --mesh-size",
+            MAX_ELEMENTS / 4
+        )));
+    }
+    let elements = job.output_elements();
+    let vfs = job.compute(None, progress)?;
+    let (scene, mesh, f) = (job.scene(), job.mesh(), &vfs.matrix);
+    let eps: Vec<f64> = elements
+        .iter()
+        .map(|&e| {
+            let m = &scene.materials[scene.polygons[mesh.elements[e as usize].patch as usize].material as usize];
+            m.thermal.map_or_else(|| 1.0 - (m.reflectance.x + m.reflectance.y + m.reflectance.z) / 3.0, |t| t.emissivity)
+        })
+        .collect();
+    // (I − F diag(1 − ε)) B = F diag(ε).
+    let par = if rayon::current_num_threads() > 1 { Par::rayon(0) } else { Par::Seq };
+    let mut a = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - f.get(i, j) * (1.0 - eps[j]));
+    let mut b = Mat::<f64>::from_fn(n, n, |i, j| f.get(i, j) * eps[j]);
+    let mut perm = vec![0usize; n];
+    let mut perm_inv = vec![0usize; n];
+    let scratch = factor::lu_in_place_scratch::<usize, f64>(n, n, par, Default::default())
+        .or(lu_solve::solve_in_place_scratch::<usize, f64>(n, n, par));
+    let mut mem = MemBuffer::new(scratch);
+    let (_, pm) = factor::lu_in_place(a.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut mem), Default::default());
+    lu_solve::solve_in_place(a.as_ref(), a.as_ref(), pm, b.as_mut(), par, MemStack::new(&mut mem));
+    drop(a);
+    // Surfaces: (object, side) in order.
+    let keys: Vec<(u32, bool)> = elements
+        .iter()
+        .map(|&e| {
+            let p = &scene.polygons[mesh.elements[e as usize].patch as usize];
+            (p.object, p.back_side)
+        })
+        .collect();
+    let mut order = keys.clone();
+    order.sort();
+    order.dedup();
+    let of: Vec<usize> = keys.iter().map(|k| order.binary_search(k).unwrap_or(0)).collect();
+    let ns = order.len();
+    let mut area = vec![0.0; ns];
+    let mut ea = vec![0.0; ns];
+    let mut gr = vec![0.0; ns * ns];
+    for (i, &e) in elements.iter().enumerate() {
+        let ai = mesh.elements[e as usize].area;
+        area[of[i]] += ai;
+        ea[of[i]] += ai * eps[i];
+        for j in 0..n {
+            gr[of[i] * ns + of[j]] += ai * eps[i] * b[(i, j)];
+        }
+    }
+    if gr.iter().any(|v| !v.is_finite()) {
+        return Err(Error::Invalid("the Gebhart system is singular (every surface of emissivity 0?)".into()));
+    }
+    let gebhart: Vec<f64> = (0..ns * ns).map(|k| if ea[k / ns] > 0.0 { gr[k] / ea[k / ns] } else { 0.0 }).collect();
+    let to_environment: Vec<f64> = (0..ns).map(|i| 1.0 - gebhart[i * ns..(i + 1) * ns].iter().sum::<f64>()).collect();
+    let big = gr.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let mut reciprocity = 0.0f64;
+    for i in 0..ns {
+        for j in i + 1..ns {
+            let (x, y) = (gr[i * ns + j], gr[j * ns + i]);
+            if x.max(y) > 1e-12 * big {
+                reciprocity = reciprocity.max((x - y).abs() / x.max(y));
+            }
+        }
+    }
+    let two_sided = scene.polygons.iter().any(|p| p.back_side);
+    let names = order
+        .iter()
+        .map(|(o, back)| {
+            let name = &scene.objects[*o as usize].name;
+            if two_sided && *back {
+                format!("{name} (back)")
+            } else {
+                name.clone()
+            }
+        })
+        .collect();
+    let emissivity = (0..ns).map(|i| ea[i] / area[i]).collect();
+    Ok(Exchange { names, areas: area, emissivity, gebhart, to_environment, conductance: gr, reciprocity, elements: n })
+}

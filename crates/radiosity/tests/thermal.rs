@@ -303,3 +303,32 @@ fn run_sized(s: Scene, size: f64) -> Thermal {
     vf.form_factors.method = radiosity::form_factor::Method::PointSampled;
     solve(s, &Settings { view_factors: vf, environment: 0.0 }, &NoProgress).unwrap()
 }
+
+/// Gebhart factors and radiative conductances: in a closed enclosure rows sum to 1,
+/// εᵢAᵢBᵢⱼ is reciprocal, and Q₁ = σ Σⱼ GR₁ⱼ (T₁⁴ − Tⱼ⁴) is the net-radiation solve's Q.
+#[test]
+fn gebhart_factors_close_are_reciprocal_and_carry_the_heat() {
+    let (e1, e2, t1, t2) = (0.6, 0.3, 800.0f64, 300.0f64);
+    let make = || {
+        scene(vec![
+            ("inner", material("hot", e1, Boundary::Temperature(t1)), icosphere(0.5, 2, false)),
+            ("outer", material("cold", e2, Boundary::Temperature(t2)), icosphere(1.0, 2, true)),
+        ])
+    };
+    let mut vf = VfSettings { per: Per::Element, mesh_size: Some(0.0), enclosure: true, ..Default::default() };
+    vf.form_factors.method = radiosity::form_factor::Method::PointSampled;
+    let settings = Settings { view_factors: vf, environment: 0.0 };
+    let x = radiosity::thermal::exchange_factors(make(), &settings, &NoProgress).unwrap();
+    let th = solve(make(), &settings, &NoProgress).unwrap();
+    assert_eq!(x.names, ["inner", "outer"]);
+    for i in 0..2 {
+        assert!(x.to_environment[i].abs() < 1e-9, "row {i} sums to {}", 1.0 - x.to_environment[i]);
+    }
+    assert!(x.reciprocity < 1e-9, "reciprocity {}", x.reciprocity);
+    let q_gr = SIGMA * x.conductance[1] * (t1.powi(4) - t2.powi(4));
+    let q = th.surfaces[0].heat;
+    assert!((q_gr - q).abs() <= 1e-9 * q, "σ GR₁₂ ΔT⁴ = {q_gr} vs Q {q}");
+    // The inner sphere sees only the outer one: what it absorbs of its own emission came
+    // back by reflection, B₁₁ = F₁₂(1 − ε₂)B₂₁-like, positive and below 1 − ε₂.
+    assert!(x.gebhart[0] > 0.0 && x.gebhart[0] < 1.0 - e2, "B11 {}", x.gebhart[0]);
+}
