@@ -11,7 +11,10 @@
 //! - temperature `T`: `Jᵢ − (1 − εᵢ) Σⱼ Fᵢⱼ Jⱼ = εᵢσTᵢ⁴ + (1 − εᵢ)Fᵢ,env σT_env⁴`;
 //! - net heat flux `q` (W/m², uniform over the surface): `Jᵢ − Σⱼ Fᵢⱼ Jⱼ = q + Fᵢ,env σT_env⁴`,
 //!   and afterwards `σTᵢ⁴ = (Jᵢ − (1 − εᵢ)Gᵢ)/εᵢ`;
-//! - adiabatic (re-radiating): `q = 0`.
+//! - adiabatic (re-radiating): `q = 0`;
+//! - a two-sided adiabatic material is a radiation shield, a thin conducting sheet: at
+//!   each point its two sides share one temperature and the heat one absorbs the other
+//!   emits, `Jf − (1 − ε)Gf = Jb − (1 − ε)Gb` and `(Jf − Gf) + (Jb − Gb) = 0`.
 //!
 //! The system (one unknown `J` per element, dense) is solved by LU factorisation. Results
 //! are reported per input object (surface): area, ε, T (for flux surfaces the
@@ -58,7 +61,8 @@ impl Default for Settings {
 pub struct SurfaceResult {
     /// Object name (`name (back)` for the back side of a two-sided surface).
     pub name: String,
-    /// What was given: "temperature", "heat flux" or "adiabatic".
+    /// What was given: "temperature", "heat flux", "adiabatic" or "shield" (a two-sided
+    /// adiabatic sheet: both sides at one temperature, what one absorbs the other emits).
     pub boundary: &'static str,
     /// Area, scene units².
     pub area: f64,
@@ -180,6 +184,28 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
     // A J = b with A = I − diag(coef) F.
     let par = if rayon::current_num_threads() > 1 { Par::rayon(0) } else { Par::Seq };
     let mut a = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - coef[i] * f.get(i, j));
+    // Shields: the two sides of a thin adiabatic sheet share a temperature and pass the heat
+    // through, J_f − (1 − ε)G_f = J_b − (1 − ε)G_b and (J_f − G_f) + (J_b − G_b) = 0.
+    let pairs = shield_pairs(scene, mesh, &elements);
+    for &(rf, rb) in &pairs {
+        let c = 1.0 - eps[rf];
+        for k in 0..n {
+            let (ff, fb) = (f.get(rf, k), f.get(rb, k));
+            let d = |r: usize| if k == r { 1.0 } else { 0.0 };
+            a[(rf, k)] = d(rf) - d(rb) - c * ff + c * fb;
+            a[(rb, k)] = d(rf) + d(rb) - ff - fb;
+        }
+        rhs[rf] = c * (f_env[rf] - f_env[rb]) * env;
+        rhs[rb] = (f_env[rf] + f_env[rb]) * env;
+    }
+    let shield: Vec<bool> = {
+        let mut v = vec![false; n];
+        for &(x, y) in &pairs {
+            v[x] = true;
+            v[y] = true;
+        }
+        v
+    };
     let mut perm = vec![0usize; n];
     let mut perm_inv = vec![0usize; n];
     let scratch = factor::lu_in_place_scratch::<usize, f64>(n, n, par, Default::default())
@@ -229,6 +255,7 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
         s[6] = match m.thermal.as_ref().map(|s| s.boundary) {
             Some(Boundary::Temperature(_)) => 0.0,
             Some(Boundary::HeatFlux(_)) => 1.0,
+            _ if shield[r] => 3.0,
             _ => 2.0,
         };
     }
@@ -241,7 +268,7 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
             let name = &scene.objects[key.0 as usize].name;
             SurfaceResult {
                 name: if two_sided && key.1 { format!("{name} (back)") } else { name.clone() },
-                boundary: ["temperature", "heat flux", "adiabatic"][s[6] as usize],
+                boundary: ["temperature", "heat flux", "adiabatic", "shield"][s[6] as usize],
                 area: s[0],
                 emissivity: s[1] / s[0],
                 temperature: (s[2] / s[0]).powf(0.25),
@@ -263,6 +290,31 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
         diagnostics: vfs.diagnostics,
         enclosure: vfs.enclosure,
     })
+}
+
+/// Rows of the front and back element at one place of every two-sided adiabatic material
+/// (a radiation shield), matched by object and centroid.
+fn shield_pairs(scene: &Scene, mesh: &crate::mesh::Mesh, elements: &[u32]) -> Vec<(usize, usize)> {
+    let diag = scene.diagonal().max(f64::MIN_POSITIVE);
+    let mut open: std::collections::HashMap<(u32, [i64; 3]), (Option<usize>, Option<usize>)> = Default::default();
+    for (r, &e) in elements.iter().enumerate() {
+        let el = &mesh.elements[e as usize];
+        let p = &scene.polygons[el.patch as usize];
+        let m = &scene.materials[p.material as usize];
+        if !(m.two_sided && matches!(m.thermal.map(|t| t.boundary), Some(Boundary::Adiabatic))) {
+            continue;
+        }
+        let q = (el.centroid / (1e-7 * diag)).round().to_array().map(|x| x as i64);
+        let slot = open.entry((p.object, q)).or_default();
+        if p.back_side {
+            slot.1 = Some(r);
+        } else {
+            slot.0 = Some(r);
+        }
+    }
+    let mut pairs: Vec<(usize, usize)> = open.into_values().filter_map(|(f, b)| Some((f?, b?))).collect();
+    pairs.sort_unstable();
+    pairs
 }
 
 /// Exchange factors between surfaces (objects and sides), from the element solution of
@@ -311,7 +363,8 @@ pub fn exchange_factors(scene: Scene, settings: &Settings, progress: &dyn Progre
         .iter()
         .map(|&e| {
             let m = &scene.materials[scene.polygons[mesh.elements[e as usize].patch as usize].material as usize];
-            m.thermal.map_or_else(|| 1.0 - (m.reflectance.x + m.reflectance.y + m.reflectance.z) / 3.0, |t| t.emissivity)
+            m.thermal
+                .map_or_else(|| 1.0 - (m.reflectance.x + m.reflectance.y + m.reflectance.z) / 3.0, |t| t.emissivity)
         })
         .collect();
     // (I − F diag(1 − ε)) B = F diag(ε).
@@ -323,7 +376,8 @@ pub fn exchange_factors(scene: Scene, settings: &Settings, progress: &dyn Progre
     let scratch = factor::lu_in_place_scratch::<usize, f64>(n, n, par, Default::default())
         .or(lu_solve::solve_in_place_scratch::<usize, f64>(n, n, par));
     let mut mem = MemBuffer::new(scratch);
-    let (_, pm) = factor::lu_in_place(a.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut mem), Default::default());
+    let (_, pm) =
+        factor::lu_in_place(a.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut mem), Default::default());
     lu_solve::solve_in_place(a.as_ref(), a.as_ref(), pm, b.as_mut(), par, MemStack::new(&mut mem));
     drop(a);
     // Surfaces: (object, side) in order.

@@ -321,3 +321,52 @@ fn gebhart_factors_close_are_reciprocal_and_carry_the_heat() {
     // back by reflection, B₁₁ = F₁₂(1 − ε₂)B₂₁-like, positive and below 1 − ε₂.
     assert!(x.gebhart[0] > 0.0 && x.gebhart[0] < 1.0 - e2, "B11 {}", x.gebhart[0]);
 }
+
+/// Radiation shields: N two-sided adiabatic spheres between a hot and a cold sphere. Each
+/// gap is a two-surface enclosure, in series: Q = σ(T₁⁴ − T₂⁴) / Σ_gaps [(1 − ε_a)/(ε_a A_a)
+/// + 1/A_a + (1 − ε_b)/(ε_b A_b)]; with equal ε and nearly equal areas (thin gaps, the
+/// parallel-plate limit) the heat falls as 1/(N + 1).
+#[test]
+fn radiation_shields_add_their_resistances_in_series() {
+    let (t1, t2, eps): (f64, f64, f64) = (700.0, 300.0, 0.4);
+    let mut q0 = 0.0;
+    for n in 0..=2usize {
+        // Radii from 1.0 to 1.03: nearly parallel plates.
+        let radii: Vec<f64> = (0..n + 2).map(|k| 1.0 + 0.03 * k as f64 / (n + 1) as f64).collect();
+        let mut parts = vec![("inner", material("hot", eps, Boundary::Temperature(t1)), icosphere(radii[0], 2, false))];
+        for k in 1..=n {
+            let mut m = material("shield", eps, Boundary::Adiabatic);
+            m.two_sided = Some(true);
+            parts.push(("shield", m, icosphere(radii[k], 2, false)));
+        }
+        parts.push(("outer", material("cold", eps, Boundary::Temperature(t2)), icosphere(radii[n + 1], 2, true)));
+        let s = scene(parts);
+        // Areas of the tessellated spheres, in order.
+        let area =
+            |o: u32| -> f64 { s.polygons.iter().filter(|p| p.object == o && !p.back_side).map(|p| p.area).sum() };
+        let a: Vec<f64> = (0..n as u32 + 2).map(area).collect();
+        let r: f64 = (0..=n).map(|k| (1.0 - eps) / (eps * a[k]) + 1.0 / a[k] + (1.0 - eps) / (eps * a[k + 1])).sum();
+        let exact = SIGMA * (t1.powi(4) - t2.powi(4)) / r;
+        let th = run(s, true);
+        check_balance(&th);
+        let q = th.surfaces[0].heat;
+        let err = (q - exact).abs() / exact;
+        if n == 0 {
+            q0 = q;
+        }
+        eprintln!(
+            "{n} shield(s): Q {q:.5e} W vs series {exact:.5e} W ({:.4} %), Q/Q0 = {:.4} (1/(N+1) = {:.4})",
+            100.0 * err,
+            q / q0,
+            1.0 / (n + 1) as f64
+        );
+        assert!(err <= 0.005, "{n} shields: {:.3} %", 100.0 * err);
+        assert!(((q / q0) * (n + 1) as f64 - 1.0).abs() <= 0.03, "{n} shields: Q/Q0 = {}", q / q0);
+        // Each shield passes the heat on: its two sides' heat cancel.
+        for s in th.surfaces.iter().filter(|s| s.boundary == "shield") {
+            assert!(s.heat.abs() > 0.5 * q, "a shield side carries the heat: {}", s.heat);
+        }
+        let shield_sum: f64 = th.surfaces.iter().filter(|s| s.boundary == "shield").map(|s| s.heat).sum();
+        assert!(shield_sum.abs() <= 1e-9 * q, "shields absorb nothing in all: {shield_sum}");
+    }
+}
