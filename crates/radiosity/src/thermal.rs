@@ -296,7 +296,8 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
 /// (a radiation shield), matched by object and centroid.
 fn shield_pairs(scene: &Scene, mesh: &crate::mesh::Mesh, elements: &[u32]) -> Vec<(usize, usize)> {
     let diag = scene.diagonal().max(f64::MIN_POSITIVE);
-    let mut open: std::collections::HashMap<(u32, [i64; 3]), (Option<usize>, Option<usize>)> = Default::default();
+    type Sides = (Option<usize>, Option<usize>);
+    let mut open: std::collections::HashMap<(u32, [i64; 3]), Sides> = Default::default();
     for (r, &e) in elements.iter().enumerate() {
         let el = &mesh.elements[e as usize];
         let p = &scene.polygons[el.patch as usize];

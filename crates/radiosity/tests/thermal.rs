@@ -323,9 +323,9 @@ fn gebhart_factors_close_are_reciprocal_and_carry_the_heat() {
 }
 
 /// Radiation shields: N two-sided adiabatic spheres between a hot and a cold sphere. Each
-/// gap is a two-surface enclosure, in series: Q = σ(T₁⁴ − T₂⁴) / Σ_gaps [(1 − ε_a)/(ε_a A_a)
-/// + 1/A_a + (1 − ε_b)/(ε_b A_b)]; with equal ε and nearly equal areas (thin gaps, the
-/// parallel-plate limit) the heat falls as 1/(N + 1).
+/// gap is a two-surface enclosure, in series: Q = σ(T₁⁴ − T₂⁴) / Σ_gaps R, with
+/// R = (1 − ε_a)/(ε_a A_a) + 1/A_a + (1 − ε_b)/(ε_b A_b); with equal ε and nearly equal
+/// areas (thin gaps, the parallel-plate limit) the heat falls as 1/(N + 1).
 #[test]
 fn radiation_shields_add_their_resistances_in_series() {
     let (t1, t2, eps): (f64, f64, f64) = (700.0, 300.0, 0.4);
@@ -334,10 +334,10 @@ fn radiation_shields_add_their_resistances_in_series() {
         // Radii from 1.0 to 1.03: nearly parallel plates.
         let radii: Vec<f64> = (0..n + 2).map(|k| 1.0 + 0.03 * k as f64 / (n + 1) as f64).collect();
         let mut parts = vec![("inner", material("hot", eps, Boundary::Temperature(t1)), icosphere(radii[0], 2, false))];
-        for k in 1..=n {
+        for &r in &radii[1..=n] {
             let mut m = material("shield", eps, Boundary::Adiabatic);
             m.two_sided = Some(true);
-            parts.push(("shield", m, icosphere(radii[k], 2, false)));
+            parts.push(("shield", m, icosphere(r, 2, false)));
         }
         parts.push(("outer", material("cold", eps, Boundary::Temperature(t2)), icosphere(radii[n + 1], 2, true)));
         let s = scene(parts);
