@@ -182,7 +182,6 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
         ));
     }
     // A J = b with A = I − diag(coef) F.
-    let par = if rayon::current_num_threads() > 1 { Par::rayon(0) } else { Par::Seq };
     let mut a = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - coef[i] * f.get(i, j));
     // Shields: the two sides of a thin adiabatic sheet share a temperature and pass the heat
     // through, J_f − (1 − ε)G_f = J_b − (1 − ε)G_b and (J_f − G_f) + (J_b − G_b) = 0.
@@ -206,16 +205,8 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
         }
         v
     };
-    let mut perm = vec![0usize; n];
-    let mut perm_inv = vec![0usize; n];
-    let scratch = factor::lu_in_place_scratch::<usize, f64>(n, n, par, Default::default())
-        .or(lu_solve::solve_in_place_scratch::<usize, f64>(n, 1, par));
-    let mut mem = MemBuffer::new(scratch);
-    let (_, pm) =
-        factor::lu_in_place(a.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut mem), Default::default());
     let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
-    lu_solve::solve_in_place(a.as_ref(), a.as_ref(), pm, x.as_mut(), par, MemStack::new(&mut mem));
-    drop(a);
+    lu_solve_dense(a, &mut x);
     let j: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
     if j.iter().any(|v| !v.is_finite()) {
         return Err(Error::Invalid(
@@ -290,6 +281,20 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
         diagnostics: vfs.diagnostics,
         enclosure: vfs.enclosure,
     })
+}
+
+/// Solves `a x = b` in place of `b` by LU with partial pivoting (faer), consuming `a`.
+fn lu_solve_dense(mut a: Mat<f64>, b: &mut Mat<f64>) {
+    let (n, k) = (a.nrows(), b.ncols());
+    let par = if rayon::current_num_threads() > 1 { Par::rayon(0) } else { Par::Seq };
+    let mut perm = vec![0usize; n];
+    let mut perm_inv = vec![0usize; n];
+    let scratch = factor::lu_in_place_scratch::<usize, f64>(n, n, par, Default::default())
+        .or(lu_solve::solve_in_place_scratch::<usize, f64>(n, k, par));
+    let mut mem = MemBuffer::new(scratch);
+    let (_, pm) =
+        factor::lu_in_place(a.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut mem), Default::default());
+    lu_solve::solve_in_place(a.as_ref(), a.as_ref(), pm, b.as_mut(), par, MemStack::new(&mut mem));
 }
 
 /// Rows of the front and back element at one place of every two-sided adiabatic material
@@ -369,18 +374,9 @@ pub fn exchange_factors(scene: Scene, settings: &Settings, progress: &dyn Progre
         })
         .collect();
     // (I − F diag(1 − ε)) B = F diag(ε).
-    let par = if rayon::current_num_threads() > 1 { Par::rayon(0) } else { Par::Seq };
-    let mut a = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - f.get(i, j) * (1.0 - eps[j]));
+    let a = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - f.get(i, j) * (1.0 - eps[j]));
     let mut b = Mat::<f64>::from_fn(n, n, |i, j| f.get(i, j) * eps[j]);
-    let mut perm = vec![0usize; n];
-    let mut perm_inv = vec![0usize; n];
-    let scratch = factor::lu_in_place_scratch::<usize, f64>(n, n, par, Default::default())
-        .or(lu_solve::solve_in_place_scratch::<usize, f64>(n, n, par));
-    let mut mem = MemBuffer::new(scratch);
-    let (_, pm) =
-        factor::lu_in_place(a.as_mut(), &mut perm, &mut perm_inv, par, MemStack::new(&mut mem), Default::default());
-    lu_solve::solve_in_place(a.as_ref(), a.as_ref(), pm, b.as_mut(), par, MemStack::new(&mut mem));
-    drop(a);
+    lu_solve_dense(a, &mut b);
     // Surfaces: (object, side) in order.
     let keys: Vec<(u32, bool)> = elements
         .iter()
