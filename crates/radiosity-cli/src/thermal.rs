@@ -4,7 +4,7 @@
 //! `[materials.NAME]` `emissivity`, `temperature`, `heat_flux`, `adiabatic`); the table
 //! goes to the terminal, `-o FILE.csv` / `--json FILE` write it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -13,7 +13,7 @@ use clap::Args;
 use radiosity::form_factor;
 use radiosity::output::matrix::{MatrixFormat, MatrixMeta, MatrixWriter};
 use radiosity::scene::{self, Scene};
-use radiosity::thermal::{exchange_factors, solve, Settings};
+use radiosity::thermal::{exchange_factors, solve, viewht, Settings};
 use radiosity::view_factors::{Per, Settings as VfSettings};
 
 use crate::common::FormFactorTuning;
@@ -23,8 +23,14 @@ use crate::progress::CliProgress;
 #[derive(Args, Debug)]
 pub struct ThermalArgs {
     /// Scene: a TOML file whose materials give emissivity and temperature, heat_flux or
-    /// adiabatic (or a mesh file whose materials carry them).
+    /// adiabatic, a .vs3 file (with --temperatures), or a View3D view-factor file (.txt/.vf,
+    /// as View3D or `radiosity viewfactors` write it) with --temperatures: ViewHT's table.
     pub scene: String,
+    /// ViewHT temperature file: lines `first last T` set surfaces first..=last (1-based, in
+    /// object order, obstructions not counted) to T kelvin; `0` ends the data. Overrides
+    /// the materials' boundary conditions for those surfaces.
+    #[arg(long, value_name = "FILE")]
+    pub temperatures: Option<PathBuf>,
     /// Temperature of the environment that receives what leaves the geometry, kelvin.
     #[arg(long, value_name = "K", default_value_t = 0.0)]
     pub environment: f64,
@@ -99,19 +105,33 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
     }
     outputs.check()?;
     crate::common::init_threads(a.threads)?;
-    let mut desc = scene::load(&a.scene)?;
+    let path = Path::new(&a.scene);
+    let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).unwrap_or_default();
+    if ext == "txt" || ext == "vf" {
+        return viewht(&a, path, t0);
+    }
+    let (mut desc, vs3) = if ext == "vs3" {
+        let (d, c) = scene::vs3::read_vs3(path)?;
+        (d, Some(c))
+    } else {
+        (scene::load(&a.scene)?, None)
+    };
+    if let Some(p) = &a.temperatures {
+        let n = radiosity::thermal::surface_objects(&desc).len();
+        let t = viewht::load_temperatures(p, n)?;
+        radiosity::thermal::set_temperatures(&mut desc, &t)?;
+    }
+    let enclosure = a.enclosure || vs3.as_ref().is_some_and(|c| c.enclosure);
+    if enclosure && !a.enclosure && !a.quiet {
+        eprintln!("the .vs3 file asks for the enclosure correction (encl=1)");
+    }
     desc.two_sided |= a.two_sided;
     let scene = Scene::from_desc(desc)?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
     let settings = Settings {
-        view_factors: VfSettings {
-            per: Per::Element,
-            mesh_size: a.mesh_size,
-            form_factors: ff,
-            enclosure: a.enclosure,
-        },
+        view_factors: VfSettings { per: Per::Element, mesh_size: a.mesh_size, form_factors: ff, enclosure },
         environment: a.environment,
     };
     let progress = CliProgress::new(a.quiet);
@@ -176,7 +196,8 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
             emissivity: &x.emissivity,
             method: &a.method,
             per: "object",
-            enclosure: a.enclosure,
+            enclosure,
+            emittances: false,
         };
         let mut extra = serde_json::Map::new();
         extra.insert("to_environment".into(), serde_json::json!(x.to_environment));
@@ -200,6 +221,69 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
                 x.to_environment.iter().fold(0.0f64, |m, v| m.max(*v))
             );
         }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// ViewHT: a View3D view-factor file and a temperature file give each surface's flux.
+fn viewht(a: &ThermalArgs, path: &Path, t0: Instant) -> Result<ExitCode> {
+    let Some(tp) = &a.temperatures else {
+        bail!("{}: a view-factor file needs --temperatures FILE (ViewHT's 'first last T' lines)", path.display());
+    };
+    if a.gebhart.is_some() || a.conductances.is_some() {
+        bail!("--gebhart/--conductances need a scene; a view-factor file carries one matrix already");
+    }
+    let vf = viewht::load_view_factor_file(path)?;
+    let t = viewht::load_temperatures(tp, vf.len())?;
+    let missing: Vec<String> =
+        t.iter().enumerate().filter(|(_, t)| t.is_none()).map(|(k, _)| (k + 1).to_string()).collect();
+    if !missing.is_empty() {
+        bail!("{}: no temperature for surface(s) {}", tp.display(), missing.join(", "));
+    }
+    let t: Vec<f64> = t.into_iter().flatten().collect();
+    let table = viewht::heat_table(&vf, &t, a.environment)?;
+    if !a.quiet && table.formed_exchange {
+        eprintln!(
+            "{}: geometric view factors (didemit = 0): grey exchange formed from the file's emissivities",
+            path.display()
+        );
+    }
+    println!("{:>5} {:>12} {:>6} {:>10} {:>12} {:>12}", "srf", "area", "eps", "T [K]", "q [W/m2]", "Q [W]");
+    for (k, r) in table.rows.iter().enumerate() {
+        println!(
+            "{:>5} {:>12.5e} {:>6.3} {:>10.3} {:>12.5e} {:>12.5e}",
+            k + 1,
+            r.area,
+            r.emissivity,
+            r.temperature,
+            r.heat_flux,
+            r.heat
+        );
+    }
+    println!(
+        "environment at {} K receives {:.5e} W; balance ΣQ − Q_env = {:.3e} W ({:.1e} of Σ|Q|); \
+         reciprocity of A·F {:.1e}; {:.2} s (q > 0: the surface loses heat)",
+        a.environment,
+        table.environment_heat,
+        table.balance,
+        if table.total > 0.0 { table.balance.abs() / table.total } else { 0.0 },
+        table.reciprocity,
+        t0.elapsed().as_secs_f64()
+    );
+    if let Some(p) = &a.output {
+        let mut s = String::from("surface,area,emissivity,temperature_K,heat_flux,heat_W\n");
+        for (k, r) in table.rows.iter().enumerate() {
+            s += &format!("{},{:e},{},{},{:e},{:e}\n", k + 1, r.area, r.emissivity, r.temperature, r.heat_flux, r.heat);
+        }
+        crate::common::write_atomic(p, s.as_bytes())?;
+    }
+    if let Some(p) = &a.json {
+        let v = serde_json::json!({
+            "surfaces": table.rows, "environment_K": a.environment, "environment_heat_W": table.environment_heat,
+            "balance_W": table.balance, "total_W": table.total, "reciprocity": table.reciprocity,
+            "emittance_weighted_input": vf.emittances,
+        });
+        crate::common::write_atomic(p, serde_json::to_string_pretty(&v)?.as_bytes())?;
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -53,6 +53,14 @@ pub struct ViewfactorsArgs {
     /// Do not apply the enclosure correction a .vs3 file asks for (encl=1).
     #[arg(long)]
     pub no_enclosure: bool,
+    /// Write View3D's emittance-weighted factors ℱ_ij = ε_i B_ij (Gebhart's B: emission of i
+    /// absorbed by j after diffuse reflections; emissivity = 1 − reflectance) instead of F,
+    /// as a .vs3 file's emit=1 asks.
+    #[arg(long, conflicts_with = "no_emittances")]
+    pub emittances: bool,
+    /// Write plain F even where a .vs3 file asks for emittance-weighted factors (emit=1).
+    #[arg(long)]
+    pub no_emittances: bool,
     /// Treat every surface as two-sided (each side gets its own row).
     #[arg(long)]
     pub two_sided: bool,
@@ -137,12 +145,24 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
     if enclosure && !a.enclosure && !a.quiet {
         eprintln!("the .vs3 file asks for the enclosure correction (encl=1); --no-enclosure to skip it");
     }
+    let emittances = a.emittances || (vs3.as_ref().is_some_and(|c| c.emittances) && !a.no_emittances);
+    if emittances && !a.emittances && !a.quiet {
+        eprintln!("the .vs3 file asks for emittance-weighted factors (emit=1); --no-emittances for plain F");
+    }
     let title = vs3.as_ref().map(|c| c.title.clone()).filter(|t| !t.is_empty()).unwrap_or_else(|| scene.name.clone());
     let settings = Settings { per, mesh_size: a.mesh_size, form_factors: ff, enclosure };
     let job = Job::new(scene, settings)?;
     let progress = CliProgress::new(a.quiet);
     let limit = memory_limit.or_else(radiosity::transport::available_memory);
-    let stream = per == Per::Element && !enclosure && limit.is_some_and(|l| job.dense_bytes() > l);
+    let stream = per == Per::Element && !enclosure && !emittances && limit.is_some_and(|l| job.dense_bytes() > l);
+    if emittances && job.len() > radiosity::thermal::MAX_ELEMENTS / 4 {
+        bail!(
+            "{} rows: emittance-weighted factors solve a dense {0} × {0} system with as many right-hand sides, \
+             at most {} rows (use --per object or a larger --mesh-size)",
+            job.len(),
+            radiosity::thermal::MAX_ELEMENTS / 4
+        );
+    }
     if !a.quiet {
         eprintln!(
             "{}: {} {}s from {} surfaces, method {}{}",
@@ -165,6 +185,7 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
         method: method.name(),
         per: per.name(),
         enclosure,
+        emittances,
     };
     let t1 = Instant::now();
     let mut extra = Map::new();
@@ -195,10 +216,20 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
         if let Some(c) = &comparison {
             extra.insert("comparison".into(), c.clone());
         }
+        let exchange = if emittances {
+            let n = vf.matrix.n();
+            let f: Vec<f64> = (0..n).flat_map(|i| vf.matrix.row(i).iter().copied()).collect();
+            Some(radiosity::thermal::total_exchange_factors(&f, &emissivity)?)
+        } else {
+            None
+        };
         write_atomic_stream(&a.output, |file| {
             let mut mw = MatrixWriter::begin(format, file, &meta)?;
             for i in 0..vf.matrix.n() {
-                mw.row(vf.matrix.row(i))?;
+                match &exchange {
+                    Some(x) => mw.row(&x[i * vf.matrix.n()..(i + 1) * vf.matrix.n()])?,
+                    None => mw.row(vf.matrix.row(i))?,
+                }
             }
             mw.finish(&extra)?;
             Ok(())

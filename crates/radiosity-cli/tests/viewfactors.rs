@@ -113,3 +113,42 @@ fn bad_requests_are_clear_errors() {
     assert!(err.contains("not an enclosure"), "{err}");
     assert!(!o.exists(), "no output is written on error");
 }
+
+#[test]
+fn emit_1_writes_view3d_emittance_weighted_factors_that_viewht_reads() {
+    // box345 with emit=1: rows of ℱ = εB sum to ε in the (corrected) enclosure.
+    let text = std::fs::read_to_string(data("box345.vs3")).unwrap().replace("emit=0", "emit=1");
+    let scene = tmp("box345-emit.vs3");
+    std::fs::write(&scene, text).unwrap();
+    let vf = tmp("box345-emit.vf");
+    let (code, err) = run(&["viewfactors", scene.to_str().unwrap(), "-o", vf.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("emittance-weighted"), "{err}");
+    let text = std::fs::read_to_string(&vf).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split_whitespace().collect();
+    assert_eq!(&header[2..5], &["0", "1", "1"], "format encl didemit");
+    let n: usize = header[5].parse().unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let eps: Vec<f64> = lines[2 + n].split_whitespace().map(|w| w.parse().unwrap()).collect();
+    for i in 0..n {
+        let sum: f64 = lines[2 + i].split_whitespace().map(|w| w.parse::<f64>().unwrap()).sum();
+        assert!((sum - eps[i]).abs() < 5e-6 * n as f64, "row {i}: Σℱ = {sum}, ε = {}", eps[i]);
+    }
+    // The same file through ViewHT's table: surfaces 1–10 hotter, the rest at 300 K.
+    let temps = tmp("box345-temps.txt");
+    std::fs::write(&temps, "1 999 300\n1 10 350\n0 0\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_radiosity"))
+        .args(["thermal", vf.to_str().unwrap(), "--temperatures", temps.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // The balance closes to the file's six decimals.
+    let rel: f64 = stdout.split(" W (").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap();
+    assert!(rel < 1e-5, "{stdout}");
+    // --no-emittances writes plain F.
+    let (code, err) =
+        run(&["viewfactors", scene.to_str().unwrap(), "--method", "analytic", "--no-emittances", "-o", vf.to_str().unwrap(), "-q"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(std::fs::read_to_string(&vf).unwrap().lines().next().unwrap().split_whitespace().nth(4), Some("0"));
+}

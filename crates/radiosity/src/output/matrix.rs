@@ -85,6 +85,9 @@ pub struct MatrixMeta<'a> {
     pub per: &'a str,
     /// Whether the enclosure correction was applied (View3D header).
     pub enclosure: bool,
+    /// Whether the values are View3D's emittance-weighted factors `ℱᵢⱼ = εᵢBᵢⱼ` rather than
+    /// `F` (View3D header `didemit`, JSON `convention`).
+    pub emittances: bool,
 }
 
 /// Writes one matrix, a row at a time.
@@ -124,16 +127,23 @@ impl<W: Write> MatrixWriter<W> {
             MatrixFormat::Json => {
                 let s = |v: &dyn erased::Ser| v.json();
                 write!(w, "{{\n \"scene\": {},\n \"method\": {},\n \"per\": {},\n", s(&meta.title), s(&meta.method), s(&meta.per))?;
-                write!(
-                    w,
-                    " \"convention\": \"F[i][j] = fraction of the energy leaving surface i (diffusely, from its front side) that arrives at surface j\",\n"
-                )?;
+                let convention = if meta.emittances {
+                    "F[i][j] = emissivity[i] * B[i][j], B[i][j] = fraction of the emission of surface i absorbed by surface j after any diffuse reflections (View3D's emittance-weighted factors, Hottel's script-F)"
+                } else {
+                    "F[i][j] = fraction of the energy leaving surface i (diffusely, from its front side) that arrives at surface j"
+                };
+                writeln!(w, " \"convention\": {},", s(&convention))?;
                 write!(w, " \"names\": {},\n \"areas\": {},\n", s(&meta.names), s(&meta.areas))?;
                 write!(w, " \"emissivity\": {},\n \"matrix\": [", s(&meta.emissivity))?;
             }
             MatrixFormat::View3d => {
                 let mut header =
-                    format!("radiosity {} 0 {} 0 {n}", env!("CARGO_PKG_VERSION"), if meta.enclosure { 1 } else { 0 });
+                    format!(
+                    "radiosity {} 0 {} {} {n}",
+                    env!("CARGO_PKG_VERSION"),
+                    u8::from(meta.enclosure),
+                    u8::from(meta.emittances)
+                );
                 while header.len() < 30 {
                     header.push(' ');
                 }
@@ -252,6 +262,7 @@ mod tests {
             method: "analytic",
             per: "object",
             enclosure: false,
+            emittances: false,
         };
         let mut w = MatrixWriter::begin(format, Vec::new(), &meta).unwrap();
         w.row(&[0.0, 0.25]).unwrap();

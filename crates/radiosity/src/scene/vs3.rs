@@ -6,8 +6,9 @@
 //! the data (anything after it is ignored, as View3D does):
 //!
 //! - `T title` — the title; `C key=value …` — control values (`encl=1` asks for the
-//!   enclosure correction, see [`Vs3Control`]; `eps` is View3D's convergence limit; the
-//!   listing/output keys are accepted and ignored);
+//!   enclosure correction, see [`Vs3Control`]; `eps` is View3D's convergence limit;
+//!   `emit=1` asks for emittance-weighted factors; the listing/output keys are accepted and
+//!   ignored);
 //! - `F 3` (or `G 3`) — 3-D geometry (2-D files, `F 2`, are refused);
 //! - `V n x y z` — vertex `n`;
 //! - `S n v1 v2 v3 v4 base cmb emit name` — a surface: `v4 = 0` for a triangle; front side
@@ -40,6 +41,9 @@ pub struct Vs3Control {
     pub enclosure: bool,
     /// `eps=`: View3D's convergence limit (a relative tolerance).
     pub eps: Option<f64>,
+    /// `emit=1`: write View3D's emittance-weighted factors (Hottel's total exchange factors
+    /// `ℱᵢⱼ = εᵢBᵢⱼ`, see [`crate::thermal::total_exchange_factors`]) instead of plain `F`.
+    pub emittances: bool,
 }
 
 /// Reads a `.vs3` file as a scene.
@@ -263,7 +267,8 @@ fn parse_control(words: &[&str], loc: &Location, ctrl: &mut Vs3Control, warnings
         match key.to_ascii_lowercase().as_str() {
             "encl" => ctrl.enclosure = int(val, loc, "encl")? != 0,
             "eps" => ctrl.eps = Some(num(val, loc, "eps")?),
-            "list" | "out" | "emit" | "maxu" | "maxo" | "mino" | "row" | "col" | "prjd" | "maxv" => {
+            "emit" => ctrl.emittances = int(val, loc, "emit")? != 0,
+            "list" | "out" | "maxu" | "maxo" | "mino" | "row" | "col" | "prjd" | "maxv" => {
                 int(val, loc, key)?;
             }
             _ => warnings.push(Warning { loc: Some(loc.clone()), msg: format!("unknown View3D control word '{key}' ignored") }),

@@ -31,9 +31,11 @@ use faer::{Mat, Par};
 
 use crate::form_factor::diagnostics::Diagnostics;
 use crate::form_factor::enclosure::EnclosureReport;
-use crate::scene::{Boundary, Scene};
+use crate::scene::{Boundary, Scene, SceneDesc, ThermalDesc};
 use crate::view_factors::{Job, Per, Settings as VfSettings};
 use crate::{Error, Progress, Result};
+
+pub mod viewht;
 
 /// The Stefan–Boltzmann constant σ, W/(m²·K⁴) (CODATA 2018, exact in the SI).
 pub const STEFAN_BOLTZMANN: f64 = 5.670_374_419e-8;
@@ -283,6 +285,81 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
     })
 }
 
+/// The objects that are surfaces of a thermal solve (every object but the obstructions),
+/// in order: surface `k` (1-based, as in a ViewHT temperature file) is object
+/// `surface_objects(desc)[k − 1]`.
+pub fn surface_objects(desc: &SceneDesc) -> Vec<u32> {
+    (0..desc.objects.len() as u32).filter(|o| !desc.obstructions.contains(o)).collect()
+}
+
+/// Gives surface `k` (see [`surface_objects`]) the temperature `t[k]` where it is `Some`:
+/// its polygons get their own copy of their material with that boundary condition (the
+/// emissivity kept).
+pub fn set_temperatures(desc: &mut SceneDesc, t: &[Option<f64>]) -> Result<()> {
+    let surfaces = surface_objects(desc);
+    if t.len() > surfaces.len() {
+        return Err(Error::Invalid(format!("{} temperatures for {} surfaces", t.len(), surfaces.len())));
+    }
+    let mut temperature = vec![None; desc.objects.len()];
+    for (k, v) in t.iter().enumerate() {
+        if let Some(v) = v {
+            if !(v.is_finite() && *v >= 0.0) {
+                return Err(Error::Invalid(format!("temperature {v} K of surface {} must be finite and ≥ 0", k + 1)));
+            }
+            temperature[surfaces[k] as usize] = Some(*v);
+        }
+    }
+    let mut copies: std::collections::HashMap<(u32, u32), u32> = std::collections::HashMap::new();
+    for p in 0..desc.polygons.len() {
+        let (m, o) = (desc.polygons[p].material, desc.polygons[p].object);
+        let Some(v) = temperature[o as usize] else { continue };
+        let next = desc.materials.len() as u32;
+        let index = *copies.entry((m, o)).or_insert(next);
+        if index == next {
+            let mut copy = desc.materials[m as usize].clone();
+            let emissivity = copy.thermal.and_then(|t| t.emissivity);
+            copy.thermal = Some(ThermalDesc { emissivity, boundary: Some(Boundary::Temperature(v)) });
+            copy.name = format!("{} ({})", copy.name, desc.objects[o as usize].name);
+            desc.materials.push(copy);
+        }
+        desc.polygons[p].material = index;
+    }
+    Ok(())
+}
+
+/// Gebhart's absorption factors of view factors `f(i, j)` between `n` surfaces of
+/// emissivities `eps`: `(I − F diag(1 − ε)) B = F diag(ε)`.
+fn gebhart_matrix(n: usize, f: impl Fn(usize, usize) -> f64, eps: &[f64]) -> Mat<f64> {
+    let a = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - f(i, j) * (1.0 - eps[j]));
+    let mut b = Mat::<f64>::from_fn(n, n, |i, j| f(i, j) * eps[j]);
+    lu_solve_dense(a, &mut b);
+    b
+}
+
+/// Hottel's total exchange factors `ℱᵢⱼ = εᵢBᵢⱼ` (script-F; View3D's "emittance-weighted"
+/// factors, `emit=1`, which ViewHT reads as `qᵢ = σ Σⱼ ℱᵢⱼ (Tⱼ⁴ − Tᵢ⁴)`) of a row-major
+/// `n × n` view-factor matrix `f` and emissivities `eps` in (0, 1]. Rows sum to `εᵢ` in a
+/// closed enclosure, less what reaches the environment (an opening, black, absorbs
+/// `1 − Σⱼ Fᵢⱼ`); `Aᵢℱᵢⱼ` is symmetric when `AᵢFᵢⱼ` is.
+pub fn total_exchange_factors(f: &[f64], eps: &[f64]) -> Result<Vec<f64>> {
+    let n = eps.len();
+    if f.len() != n * n {
+        return Err(Error::Invalid(format!("{} view factors for {n} surfaces (need {})", f.len(), n * n)));
+    }
+    if let Some((i, e)) = eps.iter().enumerate().find(|(_, e)| !(**e > 0.0 && **e <= 1.0)) {
+        return Err(Error::Invalid(format!("emissivity {e} of surface {} is not in (0, 1]", i + 1)));
+    }
+    if let Some(k) = f.iter().position(|v| !v.is_finite()) {
+        return Err(Error::Invalid(format!("view factor [{}][{}] is not a number", k / n + 1, k % n + 1)));
+    }
+    let b = gebhart_matrix(n, |i, j| f[i * n + j], eps);
+    let out: Vec<f64> = (0..n * n).map(|k| eps[k / n] * b[(k / n, k % n)]).collect();
+    if out.iter().any(|v| !v.is_finite()) {
+        return Err(Error::Invalid("the exchange system is singular".into()));
+    }
+    Ok(out)
+}
+
 /// Solves `a x = b` in place of `b` by LU with partial pivoting (faer), consuming `a`.
 fn lu_solve_dense(mut a: Mat<f64>, b: &mut Mat<f64>) {
     let (n, k) = (a.nrows(), b.ncols());
@@ -373,10 +450,7 @@ pub fn exchange_factors(scene: Scene, settings: &Settings, progress: &dyn Progre
                 .map_or_else(|| 1.0 - (m.reflectance.x + m.reflectance.y + m.reflectance.z) / 3.0, |t| t.emissivity)
         })
         .collect();
-    // (I − F diag(1 − ε)) B = F diag(ε).
-    let a = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - f.get(i, j) * (1.0 - eps[j]));
-    let mut b = Mat::<f64>::from_fn(n, n, |i, j| f.get(i, j) * eps[j]);
-    lu_solve_dense(a, &mut b);
+    let b = gebhart_matrix(n, |i, j| f.get(i, j), &eps);
     // Surfaces: (object, side) in order.
     let keys: Vec<(u32, bool)> = elements
         .iter()
