@@ -65,7 +65,13 @@ pub(crate) struct Rows<'a> {
 
 impl<'a> Rows<'a> {
     pub fn new(ctx: &'a Context<'a>) -> Self {
-        Rows { ctx, tree: PolyTree::new(&ctx.scene.polygons), twins: &ctx.twins, cache: PairCache::default(), budget: BudgetHits::default() }
+        // No polygon with a vertex behind another's plane ([`super::possible_occlusion`]):
+        // every polygon bounds the convex region in front of all of them, so nothing can
+        // come between two of them and the occluder search has nothing to look through
+        // (two parallel plates cut into thousands of facets, a convex room).
+        let never_occluded = super::possible_occlusion(ctx.scene).is_none();
+        let tree = PolyTree::new(if never_occluded { &[] } else { &ctx.scene.polygons });
+        Rows { ctx, tree, twins: &ctx.twins, cache: PairCache::default(), budget: BudgetHits::default() }
     }
 
     /// `A_a F_ab` for row `a` and column `b` (on patches `patches`), computed by

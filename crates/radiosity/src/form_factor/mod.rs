@@ -564,17 +564,19 @@ fn drive<R: RowSource>(
 /// segment between points of `p` and `r` would need points on both sides of its own plane
 /// or the segment to lie in it. Polygons back to back count as possibly occluding.
 pub fn possible_occlusion(scene: &Scene) -> Option<String> {
+    use rayon::prelude::*;
     let eps = 1e-9 * scene.diagonal();
     let polys = &scene.polygons;
-    for (pi, p) in polys.iter().enumerate() {
+    // n² tests when nothing can occlude (the case that matters), in parallel; the first
+    // witness in polygon order, so the message does not depend on the threads.
+    polys.par_iter().enumerate().find_map_first(|(pi, p)| {
         let c = p.vertices[0];
-        for (qi, q) in polys.iter().enumerate() {
-            if qi != pi && q.vertices.iter().any(|v| p.normal.dot(*v - c) < -eps) {
-                return Some(format!("polygon {qi} has a vertex behind the plane of polygon {pi}"));
-            }
-        }
-    }
-    None
+        polys
+            .iter()
+            .enumerate()
+            .find(|(qi, q)| *qi != pi && q.vertices.iter().any(|v| p.normal.dot(*v - c) < -eps))
+            .map(|(qi, _)| format!("polygon {qi} has a vertex behind the plane of polygon {pi}"))
+    })
 }
 
 /// Fails with [`Error::TooLarge`] when the collected rows could not fit in memory. The

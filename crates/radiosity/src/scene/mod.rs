@@ -15,6 +15,7 @@
 //! Formats: OBJ + MTL ([`obj`]), glTF 2.0 ([`gltf`]), a TOML scene file ([`toml_file`]),
 //! and the built-in scenes ([`builtin`]).
 
+pub mod arrays;
 pub mod builtin;
 pub mod camera;
 pub mod gltf;

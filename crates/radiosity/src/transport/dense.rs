@@ -41,6 +41,11 @@ impl DenseMatrix {
         DenseMatrix { n, data }
     }
 
+    /// The row-major values, without a copy.
+    pub fn into_vec(self) -> Vec<f64> {
+        self.data
+    }
+
     /// Number of rows (= columns).
     pub fn n(&self) -> usize {
         self.n
