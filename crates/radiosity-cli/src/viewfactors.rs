@@ -17,7 +17,8 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use radiosity::form_factor::{self, diagnostics::Diagnostics};
-use radiosity::output::matrix::{MatrixFormat, MatrixMeta, MatrixWriter};
+use radiosity::form_factor::sparse::Truncation;
+use radiosity::output::matrix::{write_sparse, MatrixFormat, MatrixMeta, MatrixWriter, SparseFormat};
 use radiosity::scene::{self, Scene};
 use radiosity::view_factors::{Job, Per, Settings};
 use radiosity::Error;
@@ -61,6 +62,11 @@ pub struct ViewfactorsArgs {
     /// Write plain F even where a .vs3 file asks for emittance-weighted factors (emit=1).
     #[arg(long)]
     pub no_emittances: bool,
+    /// Write a sparse matrix: entries below T dropped (a pair is kept when either of its two
+    /// factors reaches T) and the rest rebalanced so that reciprocity stays exact and every
+    /// row keeps its sum; format by extension: .mtx (Matrix Market), .csv (triplets), .json.
+    #[arg(long, value_name = "T")]
+    pub sparse_threshold: Option<f64>,
     /// Treat every surface as two-sided (each side gets its own row).
     #[arg(long)]
     pub two_sided: bool,
@@ -107,9 +113,23 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
     let t0 = Instant::now();
     let method: form_factor::Method = a.method.parse()?;
     let per: Per = a.per.parse()?;
-    let format = match &a.format {
-        Some(f) => f.parse()?,
-        None => MatrixFormat::from_path(&a.output).with_context(|| {
+    let sparse = match a.sparse_threshold {
+        None => None,
+        Some(t) if !(t.is_finite() && t >= 0.0) => bail!("--sparse-threshold must be a number ≥ 0, got {t}"),
+        Some(t) => {
+            if a.format.is_some() {
+                bail!("--format does not apply to a sparse matrix: its format follows the extension (.mtx, .csv, .json)");
+            }
+            let f = SparseFormat::from_path(&a.output).with_context(|| {
+                format!("{}: a sparse matrix is written as .mtx (Matrix Market), .csv (triplets) or .json", a.output.display())
+            })?;
+            Some((f, t))
+        }
+    };
+    let format = match (&a.format, sparse) {
+        (_, Some(_)) => MatrixFormat::Csv, // unused
+        (Some(f), None) => f.parse()?,
+        (None, None) => MatrixFormat::from_path(&a.output).with_context(|| {
             format!("{}: cannot tell the format from the extension (use .csv, .npy, .json, .txt/.vf or --format)", a.output.display())
         })?,
     };
@@ -190,8 +210,19 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
     let t1 = Instant::now();
     let mut extra = Map::new();
     let (diagnostics, stats, comparison) = if stream {
-        let mut w = None;
-        let (d, stats) = write_atomic_stream(&a.output, |file| {
+        let (d, stats) = if let Some((sf, t)) = sparse {
+            let mut tr = Truncation::new(&areas, t)?;
+            let (d, stats) = job.stream(&progress, &mut |row| {
+                tr.push(row);
+                Ok(())
+            })?;
+            extra.insert("diagnostics".into(), json!(d));
+            extra.insert("form_factors".into(), json!(stats));
+            write_truncated(a, sf, tr, &meta, &mut extra)?;
+            (d, stats)
+        } else {
+            let mut w = None;
+            write_atomic_stream(&a.output, |file| {
             let mut mw = MatrixWriter::begin(format, file, &meta)?;
             let (d, stats) = job.stream(&progress, &mut |row| mw.row(row).map_err(|e| Error::io(&a.output, e)))?;
             w = Some((d.clone(), stats.clone()));
@@ -200,7 +231,8 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
             mw.finish(&extra)?;
             Ok(())
         })
-        .and_then(|_| w.context("no result"))?;
+        .and_then(|_| w.context("no result"))?
+        };
         (d, stats, None)
     } else {
         let vf = job.compute(memory_limit, &progress)?;
@@ -223,6 +255,17 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
         } else {
             None
         };
+        if let Some((sf, t)) = sparse {
+            let n = vf.matrix.n();
+            let mut tr = Truncation::new(&areas, t)?;
+            for i in 0..n {
+                match &exchange {
+                    Some(x) => tr.push(&x[i * n..(i + 1) * n]),
+                    None => tr.push(vf.matrix.row(i)),
+                }
+            }
+            write_truncated(a, sf, tr, &meta, &mut extra)?;
+        } else {
         write_atomic_stream(&a.output, |file| {
             let mut mw = MatrixWriter::begin(format, file, &meta)?;
             for i in 0..vf.matrix.n() {
@@ -234,6 +277,7 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
             mw.finish(&extra)?;
             Ok(())
         })?;
+        }
         if let (Some(e), false) = (&vf.enclosure, a.quiet) {
             eprintln!(
                 "enclosure correction: {} iterations; closure error {:.2e} → {:.2e}, reciprocity {:.2e} → {:.2e}; \
@@ -371,4 +415,37 @@ fn compare(path: &Path, names: &[String], m: &radiosity::transport::DenseMatrix)
         "worst": [rnames[at.0], rnames[at.1]],
         "max_abs_error_per_row": per_row,
     }))
+}
+
+/// Rebalances the collected rows and writes the sparse matrix, with the report in `extra`.
+fn write_truncated(
+    a: &ViewfactorsArgs,
+    format: SparseFormat,
+    tr: Truncation,
+    meta: &MatrixMeta,
+    extra: &mut Map<String, serde_json::Value>,
+) -> Result<()> {
+    let (m, rep) = tr.finish()?;
+    if !a.quiet {
+        eprintln!(
+            "sparse: {} of {} non-zero entries kept (threshold {:e}, density {:.2e}); up to {:.2e} of a row's sum \
+             given back to its kept entries; row sums kept to {:.1e}, reciprocity {:.1e}; largest change of a kept \
+             factor {:.2e}{}",
+            rep.kept,
+            rep.nonzero_before,
+            rep.threshold,
+            rep.density,
+            rep.max_dropped_row_share,
+            rep.row_sum_error,
+            rep.reciprocity_rel,
+            rep.max_change,
+            if rep.emptied_rows > 0 { format!("; {} rows lost every entry", rep.emptied_rows) } else { String::new() }
+        );
+    }
+    extra.insert("sparse".into(), json!(rep));
+    write_atomic_stream(&a.output, |file| {
+        write_sparse(format, file, meta, &m, extra)?;
+        Ok(())
+    })?;
+    Ok(())
 }

@@ -152,3 +152,70 @@ fn emit_1_writes_view3d_emittance_weighted_factors_that_viewht_reads() {
     assert_eq!(code, 0, "{err}");
     assert_eq!(std::fs::read_to_string(&vf).unwrap().lines().next().unwrap().split_whitespace().nth(4), Some("0"));
 }
+
+/// (n, row sums, A_i F_ij by (i, j)) of a Matrix Market file with areas in its comments.
+fn read_mtx(path: &Path) -> (usize, Vec<f64>, std::collections::HashMap<(usize, usize), f64>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut areas = Vec::new();
+    let mut entries = Vec::new();
+    let mut n = 0;
+    for line in text.lines() {
+        let w: Vec<&str> = line.split_whitespace().collect();
+        if line.starts_with('%') {
+            if w.len() > 3 && w[2] == "area" {
+                areas.push(w[3].parse::<f64>().unwrap());
+            }
+        } else if n == 0 {
+            n = w[0].parse().unwrap();
+        } else {
+            entries.push((w[0].parse::<usize>().unwrap() - 1, w[1].parse::<usize>().unwrap() - 1, w[2].parse::<f64>().unwrap()));
+        }
+    }
+    let mut sums = vec![0.0; n];
+    let mut af = std::collections::HashMap::new();
+    for (i, j, f) in entries {
+        sums[i] += f;
+        af.insert((i, j), areas[i] * f);
+    }
+    (n, sums, af)
+}
+
+#[test]
+fn sparse_output_keeps_row_sums_and_reciprocity() {
+    let scene = data("box345.vs3");
+    // Dense reference: row sums.
+    let dense = tmp("box-dense.json");
+    assert_eq!(run(&["viewfactors", &scene, "-o", dense.to_str().unwrap(), "-q"]).0, 0);
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&dense).unwrap()).unwrap();
+    let rows: Vec<f64> =
+        v["matrix"].as_array().unwrap().iter().map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).sum()).collect();
+    let nonzero: usize = v["matrix"].as_array().unwrap().iter().map(|r| r.as_array().unwrap().iter().filter(|x| x.as_f64().unwrap() > 0.0).count()).sum();
+    let mtx = tmp("box.mtx");
+    let (code, err) = run(&["viewfactors", &scene, "-o", mtx.to_str().unwrap(), "--sparse-threshold", "0.01"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("sparse:"), "{err}");
+    let (n, sums, af) = read_mtx(&mtx);
+    assert_eq!(n, rows.len());
+    assert!(af.len() < nonzero / 2, "kept {} of {nonzero}", af.len());
+    for i in 0..n {
+        assert!((sums[i] - rows[i]).abs() < 1e-9, "row {i}: {} vs {}", sums[i], rows[i]);
+    }
+    for (&(i, j), &x) in &af {
+        let y = af.get(&(j, i)).copied().unwrap_or(0.0);
+        assert!((x - y).abs() <= 1e-6 * x.max(y), "A F [{i}][{j}] {x} vs {y}");
+    }
+    // Streamed per element (the matrix never held dense) into CSV triplets.
+    let csv = tmp("pp-elements.csv");
+    let (code, err) = run(&[
+        "viewfactors", &data("ParallelPlanes.vs3"), "--per", "element", "--mesh-size", "0.2", "--method", "point-sampled",
+        "--memory-limit", "1K", "--sparse-threshold", "1e-3", "-o", csv.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("streamed") && err.contains("sparse:"), "{err}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(text.starts_with("row,column,row_name,column_name,value\n") && text.lines().count() > 100);
+    // Formats that cannot hold a sparse matrix are refused before any work.
+    let (code, err) = run(&["viewfactors", &scene, "-o", tmp("x.npy").to_str().unwrap(), "--sparse-threshold", "0.01"]);
+    assert_ne!(code, 0);
+    assert!(err.contains(".mtx"), "{err}");
+}

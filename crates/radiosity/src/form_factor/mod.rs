@@ -36,6 +36,7 @@ pub mod enclosure;
 pub mod hemicube;
 pub mod hierarchical;
 pub mod monte_carlo;
+pub mod sparse;
 mod point_sampled;
 mod twins;
 

@@ -227,6 +227,81 @@ impl<W: Write> MatrixWriter<W> {
     }
 }
 
+/// Formats of a truncated (sparse) matrix.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SparseFormat {
+    /// Matrix Market coordinate format (`.mtx`; `scipy.io.mmread`), 1-based, with the
+    /// names and areas as comments.
+    MatrixMarket,
+    /// CSV triplets `row,column,row_name,column_name,value` (0-based indices).
+    Csv,
+    /// JSON: names, areas, CSR arrays `row_ptr`, `cols`, `vals`, then the extras.
+    Json,
+}
+
+impl SparseFormat {
+    /// The format of a file name's extension (`.mtx`, `.csv`, `.json`).
+    pub fn from_path(path: &Path) -> Option<SparseFormat> {
+        match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
+            "mtx" => Some(SparseFormat::MatrixMarket),
+            "csv" => Some(SparseFormat::Csv),
+            "json" => Some(SparseFormat::Json),
+            _ => None,
+        }
+    }
+}
+
+/// Writes a truncated matrix.
+pub fn write_sparse<W: Write>(
+    format: SparseFormat,
+    mut w: W,
+    meta: &MatrixMeta,
+    m: &crate::form_factor::sparse::SparseMatrix,
+    extra: &serde_json::Map<String, serde_json::Value>,
+) -> io::Result<W> {
+    let n = m.n;
+    let what = if meta.emittances { "emittance-weighted factors eps_i B_ij" } else { "view factors F_ij" };
+    match format {
+        SparseFormat::MatrixMarket => {
+            writeln!(w, "%%MatrixMarket matrix coordinate real general")?;
+            writeln!(w, "% {}: {what}, truncated and rebalanced (radiosity {})", meta.title, env!("CARGO_PKG_VERSION"))?;
+            for (k, (name, a)) in meta.names.iter().zip(meta.areas).enumerate() {
+                writeln!(w, "% {} area {a} name {}", k + 1, name.replace('\n', " "))?;
+            }
+            writeln!(w, "{n} {n} {}", m.nnz())?;
+            for i in 0..n {
+                let (c, v) = m.row(i);
+                for (j, f) in c.iter().zip(v) {
+                    writeln!(w, "{} {} {f:e}", i + 1, j + 1)?;
+                }
+            }
+        }
+        SparseFormat::Csv => {
+            writeln!(w, "row,column,row_name,column_name,value")?;
+            for i in 0..n {
+                let (c, v) = m.row(i);
+                for (&j, f) in c.iter().zip(v) {
+                    writeln!(w, "{i},{j},{},{},{f}", csv_field(&meta.names[i]), csv_field(&meta.names[j as usize]))?;
+                }
+            }
+        }
+        SparseFormat::Json => {
+            let s = |v: &dyn erased::Ser| v.json();
+            write!(w, "{{\n \"scene\": {},\n \"method\": {},\n \"per\": {},\n", s(&meta.title), s(&meta.method), s(&meta.per))?;
+            writeln!(w, " \"values\": {},", s(&what))?;
+            write!(w, " \"names\": {},\n \"areas\": {},\n", s(&meta.names), s(&meta.areas))?;
+            write!(w, " \"row_ptr\": {},\n \"cols\": {},\n \"vals\": {}", s(&m.row_ptr), s(&m.cols), s(&m.vals))?;
+            for (k, v) in extra {
+                let text = serde_json::to_string_pretty(v).map_err(io::Error::other)?;
+                write!(w, ",\n {}: {}", serde_json::Value::String(k.clone()), text.replace('\n', "\n "))?;
+            }
+            writeln!(w, "\n}}")?;
+        }
+    }
+    w.flush()?;
+    Ok(w)
+}
+
 /// A CSV field, quoted when it holds a comma, quote or line break.
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n', '\r']) {
