@@ -24,7 +24,7 @@ if ! (cd "$here" && npm install --no-audit --no-fund --loglevel=error >/dev/null
   exit 0
 fi
 cargo build --release -q -p radiosity-cli --manifest-path "$root/Cargo.toml" || exit 1
-bin="$root/target/release/radiosity"
+bin="${CARGO_TARGET_DIR:-$root/target}/release/radiosity"
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 "$bin" bake --quiet -o "$out/cornell.glb" || exit 1
