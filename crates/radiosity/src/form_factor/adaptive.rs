@@ -372,11 +372,17 @@ impl Rows<'_> {
         let polys = &ctx.scene.polygons;
         let eps = ctx.eps;
         shaft_planes(pi, pj, eps, &mut s.shaft);
+        // The pair's own planes too, strictly behind `eps` (the polygon test below keeps
+        // what reaches `eps` exactly, and rejects nothing more with them): whole subtrees
+        // behind either polygon or outside the shaft are skipped — in a city the pair's
+        // box holds thousands of facets, its shaft a few.
+        s.shaft.push((ni, ni.dot(oi) - 1e-3 * eps));
+        s.shaft.push((nj, nj.dot(oj) - 1e-3 * eps));
         let occ = &mut s.occ;
         let shaft = &s.shaft;
         let (a, b) = (&mut s.eval.a, &mut s.eval.b);
         let flat = &ctx.flatness;
-        self.tree.query(lo, hi, &mut |k| {
+        self.tree.query_pruned(lo, hi, shaft, eps, &mut |k| {
             if k == patch_i || k == patch_j {
                 return;
             }
@@ -893,8 +899,10 @@ impl PolyTree {
         Self::build(boxes, items, left + 1, mid, end, nodes);
     }
 
-    /// Calls `f` with every polygon whose bounding box overlaps `[lo, hi]`.
-    pub fn query(&self, lo: DVec3, hi: DVec3, f: &mut dyn FnMut(u32)) {
+    /// Calls `f` with every polygon whose bounding box overlaps `[lo, hi]`, skipping nodes
+    /// whose box lies entirely on the non-positive side (`n·p − d ≤ eps`) of one of
+    /// `planes`.
+    pub fn query_pruned(&self, lo: DVec3, hi: DVec3, planes: &[(DVec3, f64)], eps: f64, f: &mut dyn FnMut(u32)) {
         if self.items.is_empty() {
             return;
         }
@@ -902,6 +910,13 @@ impl PolyTree {
         while let Some(k) = stack.pop() {
             let n = self.nodes[k];
             if n.lo.cmpgt(hi).any() || n.hi.cmplt(lo).any() {
+                continue;
+            }
+            // The box corner farthest along each plane's normal.
+            if planes.iter().any(|(pn, d)| {
+                let far = DVec3::select(pn.cmpgt(DVec3::ZERO), n.hi, n.lo);
+                pn.dot(far) - d <= eps
+            }) {
                 continue;
             }
             if n.count > 0 {
