@@ -249,9 +249,7 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
             extra.insert("comparison".into(), c.clone());
         }
         let exchange = if emittances {
-            let n = vf.matrix.n();
-            let f: Vec<f64> = (0..n).flat_map(|i| vf.matrix.row(i).iter().copied()).collect();
-            Some(radiosity::thermal::total_exchange_factors(&f, &emissivity)?)
+            Some(radiosity::thermal::total_exchange_factors(vf.matrix.as_slice(), &emissivity)?)
         } else {
             None
         };

@@ -371,19 +371,6 @@ fn radiation_shields_add_their_resistances_in_series() {
     }
 }
 
-/// Howell C-11: unit-area-normalised factor between directly opposed `a × a` squares at
-/// distance `c`.
-fn opposed_squares(a: f64, c: f64) -> f64 {
-    let (x, y) = (a / c, a / c);
-    let (x2, y2) = (x * x, y * y);
-    2.0 / (std::f64::consts::PI * x * y)
-        * ((((1.0 + x2) * (1.0 + y2)) / (1.0 + x2 + y2)).sqrt().ln()
-            + x * (1.0 + y2).sqrt() * (x / (1.0 + y2).sqrt()).atan()
-            + y * (1.0 + x2).sqrt() * (y / (1.0 + x2).sqrt()).atan()
-            - x * x.atan()
-            - y * y.atan())
-}
-
 /// Solves `m x = r` (small, dense; partial pivoting).
 fn gauss(mut m: Vec<Vec<f64>>, mut r: Vec<f64>) -> Vec<f64> {
     let n = r.len();
@@ -408,13 +395,12 @@ fn gauss(mut m: Vec<Vec<f64>>, mut r: Vec<f64>) -> Vec<f64> {
 
 /// Parallel square plates (1 × 1, gap 0.001 between neighbours, open edges to black space
 /// at 0 K) with 0, 1, 2 two-sided adiabatic shields between them, one element per surface
-/// with exact, occluded factors (adaptive): the network of grey surfaces with the closed-
-/// form factor (Howell C-11) between neighbours, the rest of each row to space; and the
+/// with exact, occluded factors (adaptive): the network of grey surfaces with the exact
+/// factor (Howell C-11) between neighbours, the rest of each row to space; and the
 /// heat falls as 1/(N + 1), as between infinite plates, up to the edges' loss.
 #[test]
 fn parallel_plates_with_shields_match_the_network_and_fall_as_one_over_n_plus_one() {
     let (t1, t2, eps, gap): (f64, f64, f64, f64) = (700.0, 300.0, 0.4, 0.001);
-    let f = opposed_squares(1.0, gap);
     let square = |z: f64, up: bool| -> Vec<Vec<DVec3>> {
         let mut v =
             vec![DVec3::new(0.0, 0.0, z), DVec3::new(1.0, 0.0, z), DVec3::new(1.0, 1.0, z), DVec3::new(0.0, 1.0, z)];
@@ -423,6 +409,14 @@ fn parallel_plates_with_shields_match_the_network_and_fall_as_one_over_n_plus_on
         }
         vec![v]
     };
+    // Opposed squares: the exact contour integral, itself checked against Howell's C-11
+    // values (`analytic_view_factors.csv`, tests/view_factors.rs).
+    let f = radiosity::form_factor::analytic::form_factor(
+        &square(0.0, true)[0],
+        DVec3::Z,
+        &square(gap, false)[0],
+        -DVec3::Z,
+    );
     let mut q0 = 0.0;
     for n in 0..=2usize {
         let top = gap * (n + 1) as f64;

@@ -112,15 +112,14 @@ fn thermal_solve_and_viewht_on_emittance_weighted_factors_agree() {
     let vs = VfSettings { per: Per::Object, mesh_size: Some(0.0), enclosure: false, ..Default::default() };
     let scene = Scene::from_desc(desc.clone()).unwrap();
     let vf = view_factors::compute(scene, &vs, &NoProgress).unwrap();
-    let n = vf.names.len();
-    let f: Vec<f64> = (0..n).flat_map(|i| vf.matrix.row(i).to_vec()).collect();
+    let f = vf.matrix.as_slice();
     let eps = vec![0.9, 0.9];
     let file = ViewFactorFile {
         program: "test".into(),
         enclosure: false,
         emittances: true,
         areas: vf.areas.clone(),
-        factors: total_exchange_factors(&f, &eps).unwrap(),
+        factors: total_exchange_factors(f, &eps).unwrap(),
         emissivity: eps,
     };
     let table = heat_table(&file, &[400.0, 300.0], 50.0).unwrap();

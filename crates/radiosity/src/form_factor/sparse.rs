@@ -135,12 +135,11 @@ impl Truncation {
         for (i, row) in self.rows.iter().enumerate() {
             for &(j, fij) in row {
                 let j = j as usize;
-                if j < i && self.rows[j].binary_search_by_key(&(i as u32), |e| e.0).is_ok() {
+                let back = self.rows[j].binary_search_by_key(&(i as u32), |e| e.0);
+                if j < i && back.is_ok() {
                     continue; // done from row j
                 }
-                let fji = self.rows[j]
-                    .binary_search_by_key(&(i as u32), |e| e.0)
-                    .map_or(a[i] * fij / a[j], |k| self.rows[j][k].1);
+                let fji = back.map_or(a[i] * fij / a[j], |k| self.rows[j][k].1);
                 let gij = 0.5 * (a[i] * fij + a[j] * fji);
                 g[i].push((j as u32, gij));
                 if j != i {

@@ -360,6 +360,22 @@ pub fn total_exchange_factors(f: &[f64], eps: &[f64]) -> Result<Vec<f64>> {
     Ok(out)
 }
 
+/// Largest `|xᵢⱼ − xⱼᵢ| / max(xᵢⱼ, xⱼᵢ)` of an `n × n` matrix of exchange areas
+/// (`AᵢFᵢⱼ`, `εᵢAᵢBᵢⱼ` …) over the pairs above 1e-12 of its largest entry.
+pub(crate) fn reciprocity_error(n: usize, x: impl Fn(usize, usize) -> f64) -> f64 {
+    let big = (0..n * n).map(|k| x(k / n, k % n).abs()).fold(0.0f64, f64::max);
+    let mut worst = 0.0f64;
+    for i in 0..n {
+        for j in i + 1..n {
+            let (a, b) = (x(i, j), x(j, i));
+            if a.max(b) > 1e-12 * big {
+                worst = worst.max((a - b).abs() / a.max(b));
+            }
+        }
+    }
+    worst
+}
+
 /// Solves `a x = b` in place of `b` by LU with partial pivoting (faer), consuming `a`.
 fn lu_solve_dense(mut a: Mat<f64>, b: &mut Mat<f64>) {
     let (n, k) = (a.nrows(), b.ncols());
@@ -480,16 +496,7 @@ pub fn exchange_factors(scene: Scene, settings: &Settings, progress: &dyn Progre
     }
     let gebhart: Vec<f64> = (0..ns * ns).map(|k| if ea[k / ns] > 0.0 { gr[k] / ea[k / ns] } else { 0.0 }).collect();
     let to_environment: Vec<f64> = (0..ns).map(|i| 1.0 - gebhart[i * ns..(i + 1) * ns].iter().sum::<f64>()).collect();
-    let big = gr.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let mut reciprocity = 0.0f64;
-    for i in 0..ns {
-        for j in i + 1..ns {
-            let (x, y) = (gr[i * ns + j], gr[j * ns + i]);
-            if x.max(y) > 1e-12 * big {
-                reciprocity = reciprocity.max((x - y).abs() / x.max(y));
-            }
-        }
-    }
+    let reciprocity = reciprocity_error(ns, |i, j| gr[i * ns + j]);
     let two_sided = scene.polygons.iter().any(|p| p.back_side);
     let names = order
         .iter()

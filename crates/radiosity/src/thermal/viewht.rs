@@ -226,9 +226,9 @@ pub fn heat_table(vf: &ViewFactorFile, t: &[f64], environment: f64) -> Result<He
         let row = &sf[i * n..(i + 1) * n];
         // What leaves i and is absorbed nowhere in the geometry reaches the environment.
         let lost = (vf.emissivity[i] - row.iter().sum::<f64>()).max(0.0);
-        let q = s * row.iter().zip(t).map(|(f, tj)| f * (t4(t[i]) - t4(*tj))).sum::<f64>()
-            + s * lost * (t4(t[i]) - t4(environment));
-        environment_heat += s * lost * (t4(t[i]) - t4(environment)) * vf.areas[i];
+        let to_environment = s * lost * (t4(t[i]) - t4(environment));
+        let q = s * row.iter().zip(t).map(|(f, tj)| f * (t4(t[i]) - t4(*tj))).sum::<f64>() + to_environment;
+        environment_heat += to_environment * vf.areas[i];
         rows.push(HeatRow {
             area: vf.areas[i],
             emissivity: vf.emissivity[i],
@@ -239,16 +239,7 @@ pub fn heat_table(vf: &ViewFactorFile, t: &[f64], environment: f64) -> Result<He
     }
     let sum: f64 = rows.iter().map(|r| r.heat).sum();
     let total = rows.iter().map(|r| r.heat.abs()).sum::<f64>() + environment_heat.abs();
-    let big = (0..n * n).map(|k| vf.areas[k / n] * sf[k]).fold(0.0f64, f64::max);
-    let mut reciprocity = 0.0f64;
-    for i in 0..n {
-        for j in i + 1..n {
-            let (x, y) = (vf.areas[i] * sf[i * n + j], vf.areas[j] * sf[j * n + i]);
-            if x.max(y) > 1e-12 * big {
-                reciprocity = reciprocity.max((x - y).abs() / x.max(y));
-            }
-        }
-    }
+    let reciprocity = super::reciprocity_error(n, |i, j| vf.areas[i] * sf[i * n + j]);
     Ok(HeatTable {
         rows,
         environment_heat,
