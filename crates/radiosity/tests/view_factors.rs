@@ -187,8 +187,11 @@ fn cornell_adaptive_matches_the_reference_to_1e3() {
         }
     }
     eprintln!("Cornell box, adaptive: max |ΔF| = {worst:.2e}");
-    // Reciprocity holds by construction (each pair is one integral).
-    assert!(vf.diagnostics.reciprocity_max_rel.unwrap() <= 1e-12);
+    // Reciprocity holds by construction (each pair is one integral), up to the row guard,
+    // which scales a row that the integration tolerance took above 1 back to 1.
+    let scaled = (vf.stats.guard.max_row_sum - 1.0).max(0.0);
+    assert!(scaled <= 1e-5, "raw row sum {}", vf.stats.guard.max_row_sum);
+    assert!(vf.diagnostics.reciprocity_max_rel.unwrap() <= 1e-12 + scaled, "{:?} (rows scaled by up to {scaled:e})", vf.diagnostics.reciprocity_max_rel);
     assert!(vf.diagnostics.row_sum_max <= 1.0 + 1e-9);
 }
 
@@ -370,4 +373,116 @@ fn every_method_solves_the_furnace() {
             assert!((b.x - expect).abs() <= tol * expect, "{}: B = {} vs {expect}", method.name(), b.x);
         }
     }
+}
+
+/// A scene of named objects, each a list of one-sided polygons.
+fn objects(parts: Vec<(&str, Vec<Vec<glam::DVec3>>)>) -> Scene {
+    use radiosity::scene::{MaterialDesc, ObjectDesc, PolygonDesc, SceneDesc};
+    let mut desc = SceneDesc {
+        name: "case".into(),
+        materials: vec![MaterialDesc::diffuse("grey", radiosity::Rgb::splat(0.5))],
+        ..Default::default()
+    };
+    for (k, (name, polys)) in parts.into_iter().enumerate() {
+        desc.objects.push(ObjectDesc { name: name.into(), loc: None });
+        for vertices in polys {
+            desc.polygons.push(PolygonDesc { uvs: Vec::new(), vertices, material: 0, object: k as u32, loc: None });
+        }
+    }
+    Scene::from_desc(desc).unwrap()
+}
+
+/// The rectangle `o + [0, nu·du] × [0, nv·dv]` cut into `nu × nv` facets, counter-clockwise
+/// about `du × dv`.
+fn facets(o: glam::DVec3, du: glam::DVec3, dv: glam::DVec3, nu: usize, nv: usize) -> Vec<Vec<glam::DVec3>> {
+    let mut out = Vec::new();
+    for j in 0..nv {
+        for i in 0..nu {
+            let p = o + du * i as f64 + dv * j as f64;
+            out.push(vec![p, p + du, p + du + dv, p + dv]);
+        }
+    }
+    out
+}
+
+/// Howell's C-11: directly opposed parallel rectangles `a × b` at distance `c`.
+fn opposed_rectangles(a: f64, b: f64, c: f64) -> f64 {
+    let (x, y) = (a / c, b / c);
+    let (x2, y2) = (x * x, y * y);
+    2.0 / (std::f64::consts::PI * x * y)
+        * (((1.0 + x2) * (1.0 + y2) / (1.0 + x2 + y2)).sqrt().ln() + x * (1.0 + y2).sqrt() * (x / (1.0 + y2).sqrt()).atan()
+            + y * (1.0 + x2).sqrt() * (y / (1.0 + x2).sqrt()).atan()
+            - x * x.atan()
+            - y * y.atan())
+}
+
+/// A wall standing between the two halves of a pair of opposed unit squares (from the
+/// floor to the ceiling along x = ½) leaves each half of the floor only the half of the
+/// ceiling above it: F = F(½ × 1 opposed rectangles at distance 1), Howell's closed form.
+/// The wall is given as 8 × 8 facets (merged into one occluder) and as one polygon, on
+/// whole polygons and on elements.
+#[test]
+fn adaptive_wall_between_two_halves_is_the_closed_form() {
+    use glam::DVec3;
+    let exact = opposed_rectangles(0.5, 1.0, 1.0);
+    for (n, mesh) in [(8, None), (1, None), (8, Some(0.25))] {
+        let wall = facets(DVec3::new(0.5, -0.5, 0.0), DVec3::new(0.0, 2.0 / n as f64, 0.0), DVec3::new(0.0, 0.0, 1.0 / n as f64), n, n);
+        let scene = objects(vec![
+            ("from", facets(DVec3::ZERO, DVec3::X, DVec3::Y, 1, 1)),
+            ("to", facets(DVec3::Z, DVec3::Y, DVec3::X, 1, 1)),
+            ("wall", wall),
+        ]);
+        let f = run(scene, Method::Adaptive, mesh, |_| {}).matrix.get(0, 1);
+        eprintln!("wall of {n}×{n} facets, mesh {mesh:?}: {f:.10} vs {exact:.10}");
+        assert!(((f - exact) / exact).abs() <= 1e-5, "{n}×{n} facets, mesh {mesh:?}: {f} vs {exact}");
+    }
+}
+
+/// A street corner as the urban-canyon script builds it (1 m facets): a ground facet sees
+/// a wall facet across the street only past the corner of a building. The factor at the
+/// default tolerance is the one the integral converges to (tolerance 1e-9) within the
+/// tolerance, 1e-5 — before the sender was cut along the shadow's events it was 0.4 %
+/// off here — and the building as 2 m facets gives the factor of the building as five
+/// polygons. A facet straight behind the building gets exactly nothing.
+#[test]
+fn adaptive_street_corner_converges_at_its_tolerance() {
+    use glam::DVec3;
+    let v = DVec3::new;
+    let ground = facets(v(12.0, 7.0, 0.0), DVec3::X, DVec3::Y, 1, 1);
+    // Facing −x (towards the street), and one behind the building facing +x... both on
+    // the far side of the street.
+    let wall = vec![vec![v(28.0, 10.0, 5.0), v(28.0, 9.0, 5.0), v(28.0, 9.0, 6.0), v(28.0, 10.0, 6.0)]];
+    let hidden = vec![vec![v(28.0, 14.0, 5.0), v(28.0, 13.0, 5.0), v(28.0, 13.0, 6.0), v(28.0, 14.0, 6.0)]];
+    // nu × nz facets per wall (nu × nu on the roof).
+    let building = |nu: usize, nz: usize| {
+        let (su, sz) = (12.0 / nu as f64, 18.0 / nz as f64);
+        let mut b = facets(v(8.0, 8.0, 18.0), DVec3::X * su, DVec3::Y * su, nu, nu); // roof
+        b.extend(facets(v(8.0, 8.0, 0.0), DVec3::X * su, DVec3::Z * sz, nu, nz)); // south, −y
+        b.extend(facets(v(20.0, 8.0, 0.0), DVec3::Y * su, DVec3::Z * sz, nu, nz)); // east, +x
+        b.extend(facets(v(20.0, 20.0, 0.0), -DVec3::X * su, DVec3::Z * sz, nu, nz)); // north
+        b.extend(facets(v(8.0, 20.0, 0.0), -DVec3::Y * su, DVec3::Z * sz, nu, nz)); // west
+        b
+    };
+    let factors = |nu: usize, nz: usize, tol: f64, per: Per| {
+        let scene = objects(vec![("ground", ground.clone()), ("wall", wall.clone()), ("hidden", hidden.clone()), ("building", building(nu, nz))]);
+        let form_factors = Options {
+            method: Method::Adaptive,
+            adaptive_tolerance: tol,
+            adaptive_max_evaluations: 10_000_000,
+            ..Default::default()
+        };
+        // Per element (one per polygon): the first three rows are the three facets.
+        let settings = Settings { per, mesh_size: Some(0.0), form_factors, enclosure: false };
+        let vf = compute(scene, &settings, &NoProgress).unwrap();
+        (vf.matrix.get(0, 1), vf.matrix.get(0, 2))
+    };
+    let default = radiosity::form_factor::adaptive::DEFAULT_TOLERANCE;
+    let (f, h) = factors(6, 9, default, Per::Element);
+    let (tight, _) = factors(6, 9, 1e-9, Per::Element);
+    let (whole, hw) = factors(1, 1, default, Per::Object);
+    eprintln!("street corner: {f:.12e} (tolerance 1e-9: {tight:.12e}; building as five polygons: {whole:.12e})");
+    assert!(f > 0.0 && f < 2e-6, "{f}");
+    assert!(((f - tight) / tight).abs() <= 1e-5, "{f} vs converged {tight}");
+    assert!(((f - whole) / whole).abs() <= 1e-9, "{f} vs {whole}");
+    assert_eq!((h, hw), (0.0, 0.0));
 }

@@ -43,6 +43,7 @@ use glam::{DVec2, DVec3};
 use super::analytic;
 use super::geom::{area2_2d, bounds_2d, bounds_3d, clip_halfspace, gauss_legendre, PieceSet, PlaneFrame};
 use super::kernel::point_to_polygon_unsided;
+use super::occluders::Occluders;
 use super::{Context, RowSource};
 
 /// Default relative tolerance.
@@ -52,6 +53,10 @@ pub const DEFAULT_MAX_EVALUATIONS: usize = 50_000;
 
 pub(crate) struct Rows<'a> {
     ctx: &'a Context<'a>,
+    /// What casts shadows: the scene's polygons, coplanar neighbours merged
+    /// ([`Occluders`]); `of[p]` is the occluder that polygon `p` is part of.
+    occluders: Occluders,
+    of: Vec<u32>,
     tree: PolyTree,
     /// [`Context::twins`]: they own their overlap, so another row sees it once (a
     /// two-sided box's bottom on the floor).
@@ -70,8 +75,12 @@ impl<'a> Rows<'a> {
         // come between two of them and the occluder search has nothing to look through
         // (two parallel plates cut into thousands of facets, a convex room).
         let never_occluded = super::possible_occlusion(ctx.scene).is_none();
-        let tree = PolyTree::new(if never_occluded { &[] } else { &ctx.scene.polygons });
-        Rows { ctx, tree, twins: &ctx.twins, cache: PairCache::default(), budget: BudgetHits::default() }
+        let polys = &ctx.scene.polygons;
+        let verts: Vec<&[DVec3]> = polys.iter().map(|p| p.vertices.as_slice()).collect();
+        let normals: Vec<DVec3> = polys.iter().map(|p| p.normal).collect();
+        let (occluders, of) = Occluders::merge(&verts, &normals, &ctx.flatness, ctx.eps);
+        let tree = PolyTree::new(if never_occluded { &[] } else { &occluders.verts });
+        Rows { ctx, occluders, of, tree, twins: &ctx.twins, cache: PairCache::default(), budget: BudgetHits::default() }
     }
 
     /// `A_a F_ab` for row `a` and column `b` (on patches `patches`), computed by
@@ -184,6 +193,17 @@ pub(crate) struct Scratch {
     twin_sender: Option<u32>,
     /// Integrand evaluations spent on the current pair.
     evals: usize,
+    /// The occluder of the row's patch, and for each occluder it faces what lies between
+    /// the two ([`Rows::between`]): `None` where one occluder hides all of one from the
+    /// other.
+    face: u32,
+    faces: std::collections::HashMap<u32, Option<Vec<u32>>>,
+    /// Where set, the possible occluders of the current pair are among these (instead of
+    /// the whole tree).
+    cands: Option<Vec<u32>>,
+    near: Vec<u32>,
+    si: Vec<DVec3>,
+    sj: Vec<DVec3>,
 }
 
 #[derive(Default)]
@@ -250,7 +270,7 @@ impl RowSource for Rows<'_> {
     type Scratch = Scratch;
 
     fn scratch(&self) -> Scratch {
-        Scratch { cached: u32::MAX, ..Default::default() }
+        Scratch { cached: u32::MAX, face: u32::MAX, ..Default::default() }
     }
 
     fn row(&self, i: usize, s: &mut Scratch, out: &mut Vec<(u32, f64)>) -> u64 {
@@ -271,8 +291,27 @@ impl RowSource for Rows<'_> {
         let oi = open(i);
         let area_i = if partly(oi) { ei.area * oi } else { ei.area };
         let patches = std::mem::take(&mut s.patches);
+        let face_i = self.of[ei.patch as usize];
+        if s.face != face_i {
+            s.face = face_i;
+            s.faces.clear();
+        }
         for &q in &patches {
             let pe = mesh.patches[q as usize];
+            // What can come between any element of this patch and any of `q`'s.
+            let face_j = self.of[q as usize];
+            let between = match s.faces.get(&face_j) {
+                Some(b) => b.clone(),
+                None => {
+                    // One list for both orders, so that the two rows of a pair integrate it alike
+                    // (reciprocity to the last bit where the pair is cached or computed twice).
+                    let b = self.between(face_i.min(face_j), face_i.max(face_j), s);
+                    s.faces.insert(face_j, b.clone());
+                    b
+                }
+            };
+            let Some(between) = between else { continue };
+            s.cands = Some(between);
             for j in pe.first..pe.first + pe.count {
                 let ej = &mesh.elements[j as usize];
                 let (cj, nj) = ctx.corners(j as usize);
@@ -285,6 +324,7 @@ impl RowSource for Rows<'_> {
                 }
             }
         }
+        s.cands = None;
         s.patches = patches;
         0
     }
@@ -370,29 +410,73 @@ impl Rows<'_> {
         s.occ.clear();
         let (oi, oj) = (pi[0], pj[0]);
         let polys = &ctx.scene.polygons;
+        let occluders = &self.occluders.verts;
+        let (own_i, own_j) = (self.of[patch_i as usize], self.of[patch_j as usize]);
         let eps = ctx.eps;
-        shaft_planes(pi, pj, eps, &mut s.shaft);
-        // The pair's own planes too, strictly behind `eps` (the polygon test below keeps
-        // what reaches `eps` exactly, and rejects nothing more with them): whole subtrees
-        // behind either polygon or outside the shaft are skipped — in a city the pair's
-        // box holds thousands of facets, its shaft a few.
-        s.shaft.push((ni, ni.dot(oi) - 1e-3 * eps));
-        s.shaft.push((nj, nj.dot(oj) - 1e-3 * eps));
+        let mut cands = s.cands.take();
+        if let Some(c) = &cands {
+            // The face pair's occluders near this pair: meeting its box, with a vertex in
+            // front of both planes. One of them alone may hide the pair (most pairs in a
+            // city), which needs no shaft.
+            let mut near = std::mem::take(&mut s.near);
+            near.clear();
+            let bounds = &self.occluders.bounds;
+            let (a, b) = (&mut s.eval.a, &mut s.eval.b);
+            near.extend(c.iter().copied().filter(|&k| {
+                let (blo, bhi) = bounds[k as usize];
+                if !(blo.cmple(hi).all() && bhi.cmpge(lo).all()) {
+                    return false;
+                }
+                let v = &occluders[k as usize];
+                if v.iter().any(|p| ni.dot(*p - oi) > eps && nj.dot(*p - oj) > eps) {
+                    return true;
+                }
+                if v.iter().all(|p| ni.dot(*p - oi) <= eps) || v.iter().all(|p| nj.dot(*p - oj) <= eps) {
+                    return false;
+                }
+                // Some of it in front of both with no vertex there (an edge across the
+                // corner of the two half-spaces).
+                clip_halfspace(v, |p| ni.dot(p - oi) - eps, 0.0, a);
+                clip_halfspace(a, |p| nj.dot(p - oj) - eps, 0.0, b);
+                !b.is_empty()
+            }));
+            if !near.is_empty() {
+                clip_halfspace(pi, |p| nj.dot(p - oj), eps, &mut s.si);
+                clip_halfspace(pj, |p| ni.dot(p - oi), eps, &mut s.sj);
+                if s.si.is_empty() || s.sj.is_empty() || near.iter().any(|&o| self.occluders.hides(o as usize, &s.si, &s.sj, eps)) {
+                    s.near = near;
+                    s.cands = cands;
+                    return 0.0;
+                }
+            }
+            let all = std::mem::replace(cands.as_mut().unwrap(), near);
+            s.near = all;
+        }
+        if cands.as_ref().is_none_or(|c| !c.is_empty()) {
+            shaft_planes(pi, pj, eps, &mut s.shaft);
+            // The pair's own planes too, strictly behind `eps` (the polygon test below keeps
+            // what reaches `eps` exactly, and rejects nothing more with them): whole subtrees
+            // behind either polygon or outside the shaft are skipped — in a city the pair's
+            // box holds thousands of facets, its shaft a few.
+            s.shaft.push((ni, ni.dot(oi) - 1e-3 * eps));
+            s.shaft.push((nj, nj.dot(oj) - 1e-3 * eps));
+        }
         let occ = &mut s.occ;
         let shaft = &s.shaft;
         let (a, b) = (&mut s.eval.a, &mut s.eval.b);
-        let flat = &ctx.flatness;
-        self.tree.query_pruned(lo, hi, shaft, eps, &mut |k| {
-            if k == patch_i || k == patch_j {
+        let flat = &self.occluders.flat;
+        let (flat_i, flat_j) = (ctx.flatness[patch_i as usize], ctx.flatness[patch_j as usize]);
+        let mut visit = |k: u32| {
+            if k == own_i || k == own_j {
                 return;
             }
-            let v = &polys[k as usize].vertices;
+            let v = &occluders[k as usize];
             // A polygon in the sender's or the receiver's plane (within the planarity
             // tolerance inputs are accepted with) blocks nothing in front of it. With `eps`
             // alone, the back copy of a slightly warped quad, which lies up to that
             // tolerance in front of its front copy, hid almost everything from it: office2's
             // chair legs in the furnace room gathered 0.4 % of their row (issue 9).
-            let tol = flat[k as usize].max(flat[patch_i as usize]).max(flat[patch_j as usize]);
+            let tol = flat[k as usize].max(flat_i).max(flat_j);
             if v.iter().all(|p| ni.dot(*p - oi).abs() <= tol) || v.iter().all(|p| nj.dot(*p - oj).abs() <= tol) {
                 return;
             }
@@ -410,7 +494,18 @@ impl Rows<'_> {
                 return;
             }
             occ.push(k);
-        });
+        };
+        match &mut cands {
+            Some(c) => {
+                for &k in c.iter() {
+                    visit(k);
+                }
+                // Give the face pair's list back.
+                std::mem::swap(c, &mut s.near);
+            }
+            None => self.tree.query_pruned(lo, hi, shaft, eps, &mut visit),
+        }
+        s.cands = cands;
         // The receiver's overlaps with lower-numbered twins belong to them and are cut out
         // of it, except for the row's own element, which gathers over all of its area.
         let cuts: &[u32] = if s.twin_sender.is_none() { &self.twins[patch_j as usize] } else { &[] };
@@ -426,6 +521,11 @@ impl Rows<'_> {
         if si.is_empty() || sj.is_empty() {
             return 0.0;
         }
+        // Hidden behind one occluder: nothing to integrate (most pairs in a city, whose
+        // buildings stand between them).
+        if s.occ.iter().any(|&o| self.occluders.hides(o as usize, &si, &sj, eps)) {
+            return 0.0;
+        }
         let cut_polys: Vec<&[DVec3]> = cuts.iter().filter(|&&t| t != patch_i).map(|&t| polys[t as usize].vertices.as_slice()).collect();
         let recv = Receiver::new(&sj, nj, &cut_polys, &mut s.eval);
         if recv.pieces.is_empty() {
@@ -433,15 +533,8 @@ impl Rows<'_> {
         }
         // Start from regions no larger than about half the distance between the two
         // polygons, so that no shadow feature is narrower than the first samples' spacing.
-        let min_level = if s.occ.is_empty() {
-            0
-        } else {
-            let (lo, hi) = bounds_3d(&si);
-            let diam = (hi - lo).length();
-            let ci = si.iter().copied().sum::<DVec3>() / si.len() as f64;
-            let dist = (recv.centroid - ci).length().max(1e-300);
-            ((2.0 * diam / dist).log2().ceil() as i32).clamp(0, 4) as u32
-        };
+        // (Each piece of the sender is held to this by its own size, see [`start_level`].)
+        let min_level = if s.occ.is_empty() { 0 } else { start_level(&si, recv.centroid) };
         // A partly covered sender is integrated over its open cells (merged into convex
         // rectangles of its parameter domain), so that the integral and the open area it
         // is divided by are one region.
@@ -458,10 +551,10 @@ impl Rows<'_> {
                 .collect(),
             None => vec![si],
         };
-        let twin_eps = 1e-7 * ctx.scene.diagonal();
+        let twin_eps = 100.0 * ctx.eps; // 1e-7 of the scene diagonal
         let mut pieces = Vec::new();
         for part in &parts {
-            for piece in self.sender_pieces(part, ni, s) {
+            for piece in self.sender_pieces(part, ni, &recv, s) {
                 if let Some(t) = s.twin_sender {
                     // The overlap with a lower-numbered twin sends as that twin.
                     let c = piece.iter().copied().sum::<DVec3>() / piece.len() as f64;
@@ -475,10 +568,59 @@ impl Rows<'_> {
         self.integrate(&pieces, ni, &recv, min_level, s)
     }
 
+    /// The occluders that can come between any part of occluder `p` and any part of
+    /// occluder `q` (the polygons of the two faces being pairs' senders and receivers):
+    /// those meeting the convex hull of the two, in front of both, with a margin of
+    /// `eps` so that every element pair's own search ([`Self::pair_directed`]) finds
+    /// its occluders among them. `None` when one of them hides all of `q` from all of
+    /// `p` ([`Occluders::hides`]), so every pair between them is 0.
+    fn between(&self, p: u32, q: u32, s: &mut Scratch) -> Option<Vec<u32>> {
+        let eps = self.ctx.eps;
+        let occ = &self.occluders;
+        let (vp, vq) = (&occ.verts[p as usize], &occ.verts[q as usize]);
+        let (np, nq) = (occ.normal[p as usize], occ.normal[q as usize]);
+        let (op, oq) = (vp[0], vq[0]);
+        // An element's plane is the face's to `eps` where the face is flat, else to the
+        // planarity tolerance.
+        let margin = |k: u32| if occ.planar[k as usize] { 2.0 * eps } else { 2.0 * eps + occ.flat[k as usize] };
+        let (mp, mq) = (margin(p), margin(q));
+        let (lo1, hi1) = occ.bounds[p as usize];
+        let (lo2, hi2) = occ.bounds[q as usize];
+        let (lo, hi) = (lo1.min(lo2) - DVec3::splat(eps), hi1.max(hi2) + DVec3::splat(eps));
+        // Elements lie in the convex hull of their face (bilinear elements of a warped
+        // quad too), so the hull of the two faces holds every pair's.
+        let mut shaft = Vec::new();
+        shaft_planes(vp, vq, eps, &mut shaft);
+        shaft.push((np, np.dot(op) - mp));
+        shaft.push((nq, nq.dot(oq) - mq));
+        let mut out = Vec::new();
+        let (a, b) = (&mut s.eval.a, &mut s.eval.b);
+        self.tree.query_pruned(lo, hi, &shaft, -eps, &mut |k| {
+            if k == p || k == q {
+                return;
+            }
+            clip_halfspace(&occ.verts[k as usize], |x| np.dot(x - op) + mp, 0.0, a);
+            clip_halfspace(a, |x| nq.dot(x - oq) + mq, 0.0, b);
+            if b.is_empty() || shaft.iter().any(|(n, d)| b.iter().all(|x| n.dot(*x) - d <= -eps)) {
+                return;
+            }
+            out.push(k);
+        });
+        if occ.planar[p as usize] && occ.planar[q as usize] {
+            let (mut sp, mut sq) = (Vec::new(), Vec::new());
+            clip_halfspace(vp, |x| nq.dot(x - oq), eps, &mut sp);
+            clip_halfspace(vq, |x| np.dot(x - op), eps, &mut sq);
+            if !sp.is_empty() && !sq.is_empty() && out.iter().any(|&o| occ.hides(o as usize, &sp, &sq, eps)) {
+                return None;
+            }
+        }
+        Some(out)
+    }
+
     /// The sender cut into convex pieces along every line where an occluder meets its
     /// plane: a box standing on the floor hides everything from the floor under it and
     /// nothing just beside it, a jump that cubature cannot resolve but a cut removes.
-    fn sender_pieces(&self, si: &[DVec3], ni: DVec3, s: &mut Scratch) -> Vec<Vec<DVec3>> {
+    fn sender_pieces(&self, si: &[DVec3], ni: DVec3, recv: &Receiver, s: &mut Scratch) -> Vec<Vec<DVec3>> {
         let eps = self.ctx.eps;
         let frame = PlaneFrame::new(si[0], ni);
         let mut outline: Vec<DVec2> = si.iter().map(|p| frame.to_2d(*p)).collect();
@@ -489,10 +631,9 @@ impl Rows<'_> {
         let mut set = PieceSet::default();
         set.push(&outline);
         let mut next = PieceSet::default();
-        let polys = &self.ctx.scene.polygons;
         for &o in s.occ.iter() {
             // Points of the occluder's boundary on the sender's plane.
-            let v = &polys[o as usize].vertices;
+            let v = &self.occluders.verts[o as usize];
             let d: Vec<f64> = v.iter().map(|p| ni.dot(*p - si[0])).collect();
             let mut on: Vec<DVec3> = Vec::new();
             for k in 0..v.len() {
@@ -526,7 +667,138 @@ impl Rows<'_> {
             set.split(frame.to_2d(pa), frame.to_2d(pb), 1e-12 * area.sqrt(), 1e-12 * area, &mut next);
             std::mem::swap(&mut set, &mut next);
         }
+        // The sender is cut along the shadow events only where that leaves at most
+        // [`MAX_EVENT_PIECES`] pieces. A one-metre facet of a city sees a few events (a
+        // building's edges), and the cuts make its integral 8 times cheaper; a whole wall
+        // of the Cornell box behind two boxes is crossed by hundreds, and the cuts would
+        // leave hundreds of pieces, many touching the receiver's plane, each with its own
+        // cubature and exact integrals (the box 0.4 s → 300 s). The cuts only partition
+        // the sender, so leaving them out changes nothing but the cost.
+        let mut cut = set.clone();
+        let mut many = false;
+        self.event_cuts(&outline, &frame, recv, s, &mut |a, b| {
+            if !many {
+                cut.split(a, b, 1e-12 * area.sqrt(), 1e-12 * area, &mut next);
+                std::mem::swap(&mut cut, &mut next);
+                many = cut.len() > MAX_EVENT_PIECES;
+            }
+        });
+        if !many {
+            set = cut;
+        }
         (0..set.len()).map(|k| set.piece(k).iter().map(|q| frame.to_3d(*q)).collect()).collect()
+    }
+
+    /// Lines of the sender's plane across which the visible part of the receiver changes
+    /// shape (the EV and VE events of discontinuity meshing: Heckbert 1992; Lischinski,
+    /// Tampieri & Greenberg 1992), for each occluder alone: where the shadow of an
+    /// occluder edge passes over a receiver vertex, and where the shadow of an occluder
+    /// vertex crosses a receiver edge. Both are segments between the points `P(v, a)`,
+    /// occluder vertex `a` seen from receiver vertex `v` on the sender's plane: `P(v,a)`–
+    /// `P(v,b)` for an occluder edge `ab`, `P(v,a)`–`P(w,a)` for a receiver edge `vw`.
+    /// Between them the integrand is smooth, so cutting the sender along every segment
+    /// that crosses it lets the cubature converge in a few rules instead of chasing the
+    /// kinks. The cuts only partition the sender (any subset gives the same integral), so
+    /// events that are not bounded segments, and those between two occluders, are left
+    /// to the adaptive refinement.
+    fn event_cuts(&self, outline: &[DVec2], frame: &PlaneFrame, recv: &Receiver, s: &mut Scratch, cut: &mut dyn FnMut(DVec2, DVec2)) {
+        let eps = self.ctx.eps;
+        let (ns, os) = (frame.n, frame.origin);
+        let (nr, or) = (recv.normal, recv.verts[0]);
+        let rv = recv.verts;
+        let m = rv.len();
+        let (lo, hi) = bounds_2d(outline);
+        let ext = (hi - lo).length();
+        // Does the segment a–b cross the (counter-clockwise, convex) outline's interior?
+        let crosses = |a: DVec2, b: DVec2| -> bool {
+            let (mut t0, mut t1) = (0.0f64, 1.0f64);
+            let d = b - a;
+            for k in 0..outline.len() {
+                let (p, q) = (outline[k], outline[(k + 1) % outline.len()]);
+                let e = q - p;
+                // Inside: left of the edge.
+                let fa = e.perp_dot(a - p);
+                let fd = e.perp_dot(d);
+                if fd.abs() < 1e-300 {
+                    if fa <= 0.0 {
+                        return false;
+                    }
+                    continue;
+                }
+                let t = -fa / fd;
+                if fd > 0.0 {
+                    t0 = t0.max(t);
+                } else {
+                    t1 = t1.min(t);
+                }
+                if t1 - t0 <= 1e-9 {
+                    return false;
+                }
+            }
+            (t1 - t0) * d.length() > 1e-9 * ext
+        };
+        let mut proj: Vec<Option<DVec2>> = Vec::new();
+        for &o in s.occ.iter() {
+            let v = &self.occluders.verts[o as usize];
+            clip_halfspace(v, |p| ns.dot(p - os) - eps, 0.0, &mut s.eval.a);
+            clip_halfspace(&s.eval.a, |p| nr.dot(p - or) - eps, 0.0, &mut s.eval.b);
+            let occ = &s.eval.b;
+            let k = occ.len();
+            if k < 2 {
+                continue;
+            }
+            // P(v, a): the ray from receiver vertex v through a, met on the sender plane.
+            proj.clear();
+            for &r in rv {
+                for &a in occ {
+                    let d = a - r;
+                    let den = ns.dot(d);
+                    let t = ns.dot(os - r) / den;
+                    proj.push((den.abs() > 1e-300 && t > 0.0 && t.is_finite()).then(|| frame.to_2d(r + d * t)));
+                }
+            }
+            let at = |vi: usize, ai: usize| proj[vi * k + ai];
+            // A segment where both ends reach the plane; where one does not, the event
+            // runs on to infinity along the line where the event's plane (normal `m`)
+            // meets the sender's plane: cut along all of that line.
+            let mut event = |p: Option<DVec2>, q: Option<DVec2>, m: DVec3| match (p, q) {
+                (Some(p), Some(q)) => {
+                    if crosses(p, q) {
+                        cut(p, q);
+                    }
+                }
+                (Some(p), None) | (None, Some(p)) => {
+                    let d3 = m.cross(ns);
+                    let d = DVec2::new(d3.dot(frame.e1), d3.dot(frame.e2));
+                    let len = d.length();
+                    if len > 1e-300 {
+                        let d = d * (ext / len);
+                        let side = |x: DVec2| d.perp_dot(x - p);
+                        let (mut pos, mut neg) = (false, false);
+                        for &x in outline {
+                            let sd = side(x);
+                            pos |= sd > 1e-9 * ext * ext;
+                            neg |= sd < -1e-9 * ext * ext;
+                        }
+                        if pos && neg {
+                            cut(p, p + d);
+                        }
+                    }
+                }
+                (None, None) => {}
+            };
+            for vi in 0..m {
+                let r = rv[vi];
+                for ai in 0..k {
+                    let (a, b) = (occ[ai], occ[(ai + 1) % k]);
+                    // EV: occluder edge (a, b) from receiver vertex v.
+                    event(at(vi, ai), at(vi, (ai + 1) % k), (a - r).cross(b - r));
+                    // VE: occluder vertex a over receiver edge (v, w).
+                    let w = rv[(vi + 1) % m];
+                    event(at(vi, ai), at((vi + 1) % m, ai), (r - a).cross(w - a));
+                }
+            }
+        }
     }
 
     /// Adaptive cubature of `F(dA_x → V_j(x))` over the sender's convex pieces, one error
@@ -547,7 +819,10 @@ impl Rows<'_> {
             for k in 1..pi.len() - 1 {
                 let tri = [pi[0], pi[k], pi[k + 1]];
                 let mut todo = vec![tri];
-                for _ in 0..min_level {
+                // A piece cut out of the sender along shadow events starts from its own
+                // size, never finer than the whole sender would.
+                let level = if pieces.len() > 1 { min_level.min(start_level(pi, recv.centroid)) } else { min_level };
+                for _ in 0..level {
                     todo = todo.iter().flat_map(split4).collect();
                 }
                 for t in todo {
@@ -620,7 +895,7 @@ impl Rows<'_> {
     fn shadow(&self, x: DVec3, dx: f64, o: u32, recv: &Receiver, always_clip: bool, s: &mut EvalScratch) -> bool {
         let fr = &recv.frame;
         let height = |q: &DVec3| fr.n.dot(*q - fr.origin);
-        clip_halfspace(&self.ctx.scene.polygons[o as usize].vertices, |p| height(&p), 0.0, &mut s.a);
+        clip_halfspace(&self.occluders.verts[o as usize], |p| height(&p), 0.0, &mut s.a);
         if always_clip || s.a.iter().any(|q| height(q) > 0.999 * dx) {
             for pn in &s.sides {
                 if s.a.is_empty() {
@@ -702,23 +977,26 @@ fn shaft_planes(pi: &[DVec3], pj: &[DVec3], eps: f64, out: &mut Vec<(DVec3, f64)
         for k in 0..a.len() {
             let (e0, e1) = (a[k], a[(k + 1) % a.len()]);
             for &v in b {
+                // Unnormalised until it is kept: the side test scales `eps` instead.
                 let n = (e1 - e0).cross(v - e0);
-                let len = n.length();
-                if !(len > 0.0) {
+                let len2 = n.length_squared();
+                if !(len2 > 0.0) {
                     continue;
                 }
-                let n = n / len;
-                let d = n.dot(e0);
-                let side = |p: &DVec3| n.dot(*p) - d;
+                let len = len2.sqrt();
+                let (d, tol) = (n.dot(e0), eps * len);
                 let (mut pos, mut neg) = (false, false);
                 for p in a.iter().chain(b) {
-                    let s = side(p);
-                    pos |= s > eps;
-                    neg |= s < -eps;
+                    let s = n.dot(*p) - d;
+                    pos |= s > tol;
+                    neg |= s < -tol;
+                    if pos && neg {
+                        break;
+                    }
                 }
                 match (pos, neg) {
-                    (true, false) => out.push((n, d)),
-                    (false, true) => out.push((-n, -d)),
+                    (true, false) => out.push((n / len, d / len)),
+                    (false, true) => out.push((-n / len, -d / len)),
                     _ => {}
                 }
             }
@@ -727,6 +1005,9 @@ fn shaft_planes(pi: &[DVec3], pj: &[DVec3], eps: f64, out: &mut Vec<(DVec3, f64)
 }
 
 const EVALS_PER_REGION: usize = 9 + 16;
+
+/// The most pieces the shadow events may cut a sender into ([`Rows::sender_pieces`]).
+const MAX_EVENT_PIECES: usize = 16;
 
 /// A sender triangle with its estimate of `∫ f`, the error of that estimate, and the
 /// occluders that can reach the shaft between it and the receiver.
@@ -752,15 +1033,19 @@ impl RegionCtx<'_, '_> {
         // The parent's occluders that still meet this region's shaft.
         let eps = self.rows.ctx.eps;
         shaft_planes(&tri, self.recv.verts, eps, self.shaft);
-        let polys = &self.rows.ctx.scene.polygons;
+        let occluders = &self.rows.occluders.verts;
         let mut occ: Vec<u32> = parent_occ
             .iter()
             .copied()
             .filter(|&o| {
-                let v = &polys[o as usize].vertices;
+                let v = &occluders[o as usize];
                 !self.shaft.iter().any(|(n, d)| v.iter().all(|p| n.dot(*p) - d <= eps))
             })
             .collect();
+        // In umbra behind one occluder: exactly nothing.
+        if occ.iter().any(|&o| self.rows.occluders.hides(o as usize, &tri, self.recv.verts, eps)) {
+            return Region { tri, est: 0.0, err: 0.0, occ: Vec::new() };
+        }
         self.order(&tri, &mut occ);
         if occ.is_empty() {
             let est = self.recv.pieces.iter().map(|p| analytic::area_factor_with(self.an, &tri, self.ni, p, self.recv.normal)).sum();
@@ -827,6 +1112,17 @@ impl Ord for Region {
     }
 }
 
+/// Subdivision levels (at most 4) that bring `poly`'s triangles to about half its
+/// distance from `target` or less: no shadow feature is then narrower than the first
+/// samples' spacing.
+fn start_level(poly: &[DVec3], target: DVec3) -> u32 {
+    let (lo, hi) = bounds_3d(poly);
+    let diam = (hi - lo).length();
+    let c = poly.iter().copied().sum::<DVec3>() / poly.len() as f64;
+    let dist = (target - c).length().max(1e-300);
+    ((2.0 * diam / dist).log2().ceil() as i32).clamp(0, 4) as u32
+}
+
 /// The four midpoint sub-triangles.
 fn split4(t: &[DVec3; 3]) -> [[DVec3; 3]; 4] {
     let (a, b, c) = (t[0], t[1], t[2]);
@@ -851,8 +1147,8 @@ struct TreeNode {
 }
 
 impl PolyTree {
-    pub fn new(polys: &[crate::scene::Polygon]) -> Self {
-        let boxes: Vec<(DVec3, DVec3)> = polys.iter().map(|p| bounds_3d(&p.vertices)).collect();
+    pub fn new(polys: &[Vec<DVec3>]) -> Self {
+        let boxes: Vec<(DVec3, DVec3)> = polys.iter().map(|p| bounds_3d(p)).collect();
         let mut items: Vec<u32> = (0..polys.len() as u32).collect();
         let mut nodes = vec![TreeNode { lo: DVec3::ZERO, hi: DVec3::ZERO, start: 0, count: 0 }];
         if !items.is_empty() {

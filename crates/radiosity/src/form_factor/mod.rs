@@ -37,6 +37,7 @@ pub mod hemicube;
 pub mod hierarchical;
 pub mod monte_carlo;
 pub mod sparse;
+mod occluders;
 mod point_sampled;
 mod twins;
 
