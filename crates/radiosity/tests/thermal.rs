@@ -2,10 +2,10 @@
 //!
 //! - Concentric spheres: Q = σA₁(T₁⁴ − T₂⁴)/[1/ε₁ + (A₁/A₂)(1/ε₂ − 1)], tessellated and
 //!   converging as the tessellation is refined (A₁, A₂ the tessellated areas).
-//! - Concentric cylinders, the inner one capped, the outer one closed by end disks that
-//!   belong to it: the same formula with the cylinders' areas (exact for a convex inner
-//!   body under a black outer one; for a grey outer one the two-surface formula assumes a
-//!   uniform radiosity, which a finite cylinder only approaches).
+//! - Concentric cylinders, the gap between them closed at the ends by annuli that belong
+//!   to the outer surface: the same formula with the two surfaces' areas (exact for a
+//!   convex inner body under a black outer one; for a grey outer one the two-surface
+//!   formula assumes a uniform radiosity, which a finite cylinder only approaches).
 //! - Every closed case balances: |ΣQ| ≤ 1e-9 Σ|Q|; heat-flux and adiabatic surfaces get
 //!   the temperature that carries their flux.
 
@@ -145,9 +145,9 @@ fn concentric_spheres_match_the_closed_form_and_converge() {
     assert!(errs[2] <= errs[0] + 1e-4, "no convergence: {errs:?}");
 }
 
-/// A cylinder of radius `r` from y = 0 to `len` as `n` quads around, with end disks (fans of
-/// `n` triangles) when `caps`; outward, or inward.
-fn cylinder(r: f64, len: f64, n: usize, caps: bool, inward: bool) -> Vec<Vec<DVec3>> {
+/// The mantle of a cylinder of radius `r` from y = 0 to `len`, `n` quads around (in rings
+/// that keep them near square), facing outward, or inward.
+fn cylinder(r: f64, len: f64, n: usize, inward: bool) -> Vec<Vec<DVec3>> {
     let at = |k: usize, y: f64| {
         let a = 2.0 * std::f64::consts::PI * (k % n) as f64 / n as f64;
         DVec3::new(r * a.cos(), y, -r * a.sin())
@@ -161,13 +161,7 @@ fn cylinder(r: f64, len: f64, n: usize, caps: bool, inward: bool) -> Vec<Vec<DVe
             out.push(vec![at(k, y0), at(k + 1, y0), at(k + 1, y1), at(k, y1)]);
         }
     }
-    if caps {
-        for k in 0..n {
-            out.push(vec![DVec3::new(0.0, len, 0.0), at(k, len), at(k + 1, len)].into_iter().rev().collect());
-            out.push(vec![DVec3::ZERO, at(k, 0.0), at(k + 1, 0.0)]);
-        }
-    }
-    // The side quads above face outward (counter-clockwise from outside), caps likewise.
+    // Turned to face outward (or inward) whatever order they were built in.
     for p in &mut out {
         let nrm = radiosity::scene::newell_normal(p);
         let c = p.iter().copied().sum::<DVec3>() / p.len() as f64;
@@ -179,19 +173,42 @@ fn cylinder(r: f64, len: f64, n: usize, caps: bool, inward: bool) -> Vec<Vec<DVe
     out
 }
 
+/// The two annuli `r1 ≤ r ≤ r2` (`n` quads each) that close the gap between two
+/// concentric cylinders at y = 0 and y = `len`, facing into the gap.
+fn annuli(r1: f64, r2: f64, len: f64, n: usize) -> Vec<Vec<DVec3>> {
+    let at = |r: f64, k: usize, y: f64| {
+        let a = 2.0 * std::f64::consts::PI * (k % n) as f64 / n as f64;
+        DVec3::new(r * a.cos(), y, -r * a.sin())
+    };
+    let mut out = Vec::new();
+    for k in 0..n {
+        for (y, up) in [(0.0, true), (len, false)] {
+            let mut q = vec![at(r1, k, y), at(r2, k, y), at(r2, k + 1, y), at(r1, k + 1, y)];
+            if (radiosity::scene::newell_normal(&q).y > 0.0) != up {
+                q.reverse();
+            }
+            out.push(q);
+        }
+    }
+    out
+}
+
+/// Long concentric cylinders (length 4 × the outer radius), the gap closed at the ends by
+/// annuli that are part of the outer surface. With a black outer surface the two-surface
+/// formula is exact (the inner mantle is convex); with a grey one it assumes a uniform
+/// outer radiosity, which the finite gap only approaches: 0.21 % here, 0.14 % at twice
+/// the length. (Closed by end disks and 1 of overhang instead, the end effect was 0.91 %.)
 #[test]
 fn concentric_cylinders_match_the_closed_form() {
-    let (r1, r2, len, t1, t2) = (0.5, 1.0, 4.0, 600.0, 300.0);
-    for (e1, e2, tol) in [(0.5, 1.0, 0.005), (0.5, 0.8, 0.01)] {
+    let (r1, r2, len, t1, t2, n) = (0.5, 1.0, 4.0, 600.0, 300.0, 32);
+    for (e1, e2, tol) in [(0.5, 1.0, 1e-4), (0.5, 0.8, 0.005)] {
         let s = scene(vec![
-            ("inner", material("hot", e1, Boundary::Temperature(t1)), cylinder(r1, len, 32, true, false)),
+            ("inner", material("hot", e1, Boundary::Temperature(t1)), cylinder(r1, len, n, false)),
             ("outer", material("cold", e2, Boundary::Temperature(t2)), {
-                let mut o = cylinder(r2, len + 2.0, 48, true, true);
-                for p in &mut o {
-                    for v in p.iter_mut() {
-                        v.y -= 1.0;
-                    }
-                }
+                // The outer mantle, and the gap closed at both ends by annuli that belong
+                // to the outer surface (the inner tube's open ends face away from the gap).
+                let mut o = cylinder(r2, len, n, true);
+                o.extend(annuli(r1, r2, len, n));
                 o
             }),
         ]);
