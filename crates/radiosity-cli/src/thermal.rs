@@ -34,6 +34,11 @@ pub struct ThermalArgs {
     /// Temperature of the environment that receives what leaves the geometry, kelvin.
     #[arg(long, value_name = "K", default_value_t = 0.0)]
     pub environment: f64,
+    /// Split the spectrum at these wavelengths (µm, increasing) and solve band by band, for
+    /// materials with one emissivity per band (TOML `emissivity = [ε₁, ε₂, …]`); overrides
+    /// the scene's `[thermal] band_edges`. `--bands none`: grey.
+    #[arg(long, value_name = "UM,UM,...")]
+    pub bands: Option<String>,
     /// Form-factor method: hemicube, analytic, point-sampled, monte-carlo, adaptive.
     #[arg(long, value_name = "METHOD", default_value = "point-sampled")]
     pub method: String,
@@ -103,6 +108,18 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
             bail!("{}: cannot tell the format from the extension (use .csv, .npy, .json, .txt or .vf)", p.display());
         }
     }
+    let band_edges = match a.bands.as_deref() {
+        None => None,
+        Some("none") | Some("") => Some(Vec::new()),
+        Some(s) => Some(
+            s.split(',')
+                .map(|x| x.trim().parse::<f64>().map_err(|_| anyhow::anyhow!("--bands: '{x}' is not a wavelength in µm")))
+                .collect::<Result<Vec<f64>>>()?,
+        ),
+    };
+    if let Some(e) = &band_edges {
+        radiosity::thermal::bands::check_edges(e).map_err(|e| anyhow::anyhow!("--bands: {e}"))?;
+    }
     outputs.check()?;
     crate::common::init_threads(a.threads)?;
     let path = Path::new(&a.scene);
@@ -133,6 +150,7 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
     let settings = Settings {
         view_factors: VfSettings { per: Per::Element, mesh_size: a.mesh_size, form_factors: ff, enclosure },
         environment: a.environment,
+        band_edges,
     };
     let progress = CliProgress::new(a.quiet);
     let exchange = if a.gebhart.is_some() || a.conductances.is_some() {
@@ -151,6 +169,16 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
             s.name, s.boundary, s.area, s.emissivity, s.temperature, s.heat_flux, s.heat, s.radiosity, s.irradiance
         );
     }
+    if !th.band_edges.is_empty() {
+        let lows = std::iter::once(0.0).chain(th.band_edges.iter().copied());
+        let highs = th.band_edges.iter().map(|e| format!("{e}")).chain(std::iter::once("inf".to_string()));
+        let names: Vec<String> = lows.zip(highs).map(|(lo, hi)| format!("{lo}-{hi} um")).collect();
+        println!("net heat leaving per band [W]:");
+        println!("{:<24} {}", "surface", names.iter().map(|n| format!("{n:>14}")).collect::<String>());
+        for s in &th.surfaces {
+            println!("{:<24} {}", s.name, s.band_heat.iter().map(|q| format!("{q:>14.5e}")).collect::<String>());
+        }
+    }
     println!(
         "environment at {} K receives {:.5e} W; balance ΣQ − Q_env = {:.3e} W ({:.1e} of Σ|Q|); {} elements, {:.2} s",
         a.environment,
@@ -161,11 +189,14 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
         t0.elapsed().as_secs_f64()
     );
     if let Some(p) = &a.output {
-        let mut s =
-            String::from("surface,condition,area,emissivity,temperature_K,heat_flux,heat_W,radiosity,irradiance\n");
+        let mut s = String::from("surface,condition,area,emissivity,temperature_K,heat_flux,heat_W,radiosity,irradiance");
+        for b in 0..th.band_edges.len() + usize::from(!th.band_edges.is_empty()) {
+            s += &format!(",heat_W_band{}", b + 1);
+        }
+        s.push('\n');
         for r in &th.surfaces {
             s += &format!(
-                "\"{}\",{},{:e},{},{},{:e},{:e},{:e},{:e}\n",
+                "\"{}\",{},{:e},{},{},{:e},{:e},{:e},{:e}{}\n",
                 r.name.replace('"', "\"\""),
                 r.boundary,
                 r.area,
@@ -174,7 +205,8 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
                 r.heat_flux,
                 r.heat,
                 r.radiosity,
-                r.irradiance
+                r.irradiance,
+                r.band_heat.iter().map(|q| format!(",{q:e}")).collect::<String>()
             );
         }
         crate::common::write_atomic(p, s.as_bytes())?;
@@ -182,7 +214,7 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
     if let Some(p) = &a.json {
         let v = serde_json::json!({
             "surfaces": th.surfaces, "environment_K": a.environment, "environment_heat_W": th.environment_heat,
-            "balance_W": th.balance, "total_W": th.total, "elements": th.elements,
+            "balance_W": th.balance, "total_W": th.total, "elements": th.elements, "band_edges_um": th.band_edges,
             "view_factors": th.diagnostics, "enclosure": th.enclosure,
         });
         crate::common::write_atomic(p, serde_json::to_string_pretty(&v)?.as_bytes())?;

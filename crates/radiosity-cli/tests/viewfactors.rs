@@ -219,3 +219,36 @@ fn sparse_output_keeps_row_sums_and_reciprocity() {
     assert_ne!(code, 0);
     assert!(err.contains(".mtx"), "{err}");
 }
+
+/// `radiosity thermal` with per-band emissivities (scenes/thermal-selective.toml: two
+/// bands split at 4 µm by the scene's `[thermal] band_edges`): the JSON carries the edges
+/// and each surface's heat per band, which add up to its heat; the enclosure balances.
+/// `--bands` overrides the scene's edges and is checked before any work.
+#[test]
+fn thermal_in_bands_from_a_scene_and_the_command_line() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/thermal-selective.toml");
+    let scene = scene.to_str().unwrap();
+    let json = tmp("selective.json");
+    let (code, err) = run(&["thermal", scene, "--enclosure", "--mesh-size", "0.25", "--json", json.to_str().unwrap(), "-q"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["band_edges_um"], serde_json::json!([4.0]));
+    let total = v["total_W"].as_f64().unwrap();
+    assert!(v["balance_W"].as_f64().unwrap().abs() <= 1e-9 * total, "{v}");
+    for s in v["surfaces"].as_array().unwrap() {
+        let bands: Vec<f64> = s["band_heat"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        assert_eq!(bands.len(), 2);
+        let heat = s["heat"].as_f64().unwrap();
+        assert!((bands.iter().sum::<f64>() - heat).abs() <= 1e-9 * total, "{s}");
+    }
+    // The re-radiating walls take in short waves and give out long ones.
+    let walls = v["surfaces"].as_array().unwrap().iter().find(|s| s["name"] == "walls").unwrap();
+    assert!(walls["band_heat"][0].as_f64().unwrap() < 0.0 && walls["band_heat"][1].as_f64().unwrap() > 0.0, "{walls}");
+    // Three bands for two emissivities; edges that go down; grey while materials have bands.
+    let (code, err) = run(&["thermal", scene, "--bands", "2,4", "-q"]);
+    assert!(code != 0 && err.contains("2 band emissivities for 3 band(s)"), "{err}");
+    let (code, err) = run(&["thermal", scene, "--bands", "4,2", "-q"]);
+    assert!(code != 0 && err.contains("--bands: band edges must increase"), "{err}");
+    let (code, err) = run(&["thermal", scene, "--bands", "none", "-q"]);
+    assert!(code != 0 && err.contains("no band edges"), "{err}");
+}

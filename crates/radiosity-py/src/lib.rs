@@ -299,9 +299,25 @@ fn thermal_geometry(
     boundary: Option<(&Option<Vec<f64>>, &Option<Vec<f64>>, &Option<Vec<bool>>)>,
 ) -> PyResult<()> {
     let n = g.labels.len();
-    let eps = per_surface(py, Some(emissivity), n, "emissivity")?.unwrap_or_default();
+    // A 2-D array: one row of band emissivities per surface.
+    let np = py.import("numpy")?;
+    let arr = np.call_method1("asarray", (emissivity, "float64"))?;
+    let bands: Option<Vec<Vec<f64>>> = if arr.getattr("ndim")?.extract::<usize>()? == 2 {
+        let rows: Vec<Vec<f64>> = arr.call_method0("tolist")?.extract()?;
+        if rows.len() != n {
+            return Err(PyValueError::new_err(format!("emissivity: {} rows of band values for {n} surfaces", rows.len())));
+        }
+        Some(rows)
+    } else {
+        None
+    };
+    let eps = match &bands {
+        Some(rows) => rows.iter().map(|r| r.iter().sum::<f64>() / r.len().max(1) as f64).collect(),
+        None => per_surface(py, Some(emissivity), n, "emissivity")?.unwrap_or_default(),
+    };
     for (k, e) in eps.iter().enumerate() {
-        if !(*e > 0.0 && *e <= 1.0) {
+        let all: Vec<f64> = bands.as_ref().map_or_else(|| vec![*e], |b| b[k].clone());
+        if let Some(e) = all.iter().find(|e| !(**e > 0.0 && **e <= 1.0)) {
             return Err(PyValueError::new_err(format!("emissivity {e} of surface {} is not in (0, 1]", g.labels[k])));
         }
         let m = &mut g.desc.materials[k];
@@ -331,7 +347,8 @@ fn thermal_geometry(
                 })
             }
         };
-        m.thermal = Some(ThermalDesc { emissivity: Some(*e), boundary: b });
+        let band_emissivity = bands.as_ref().map(|b| b[k].clone()).unwrap_or_default();
+        m.thermal = Some(ThermalDesc { emissivity: Some(*e), boundary: b, band_emissivity });
     }
     Ok(())
 }
@@ -342,6 +359,7 @@ fn thermal_settings(
     enclosure: bool,
     environment: f64,
     seed: u64,
+    band_edges: Option<Vec<f64>>,
 ) -> PyResult<rc::thermal::Settings> {
     Ok(rc::thermal::Settings {
         view_factors: VfSettings {
@@ -351,6 +369,7 @@ fn thermal_settings(
             enclosure,
         },
         environment,
+        band_edges,
     })
 }
 
@@ -363,23 +382,27 @@ fn thermal_settings(
 /// Parameters
 /// ----------
 /// vertices, faces, surfaces, obstructions, two_sided : as for `view_factors`
-/// emissivity : scalar or per surface, in (0, 1]
+/// emissivity : scalar or per surface, in (0, 1]; with `band_edges`, an array of shape
+///     (surfaces, bands) gives each surface one emissivity per band
 /// temperature, heat_flux : scalar or per surface (NaN: not given)
 /// adiabatic : bool or per surface
 /// environment : temperature [K] of what the geometry does not close (1 − Σ F)
 /// method : form factors per element (default "point-sampled")
 /// mesh_size : element size (default: diagonal / 40; 0: the faces themselves)
 /// enclosure : enforce reciprocity and closure (closed geometry only)
+/// band_edges : wavelengths in µm that split the spectrum into bands (band-energy
+///     approximation: each band a grey exchange of its share of the blackbody emission)
 ///
 /// Returns
 /// -------
-/// dict: "area", "emissivity", "temperature", "heat_flux" (W/m², leaving), "heat" (W),
-/// "radiosity", "irradiance" (per surface arrays), "environment_heat", "balance"
-/// (ΣQ − Q_env), "total" (Σ|Q|), "elements", "diagnostics".
+/// dict: "area", "emissivity" (with bands: total, at each surface's temperature),
+/// "temperature", "heat_flux" (W/m², leaving), "heat" (W), "radiosity", "irradiance" (per
+/// surface arrays), with bands "band_heat" (surfaces, bands) in W, "environment_heat",
+/// "balance" (ΣQ − Q_env), "total" (Σ|Q|), "elements", "diagnostics".
 #[pyfunction]
 #[pyo3(signature = (vertices, faces, emissivity, *, temperature=None, heat_flux=None, adiabatic=None,
     environment=0.0, surfaces=None, obstructions=None, two_sided=false, method="point-sampled", mesh_size=None,
-    enclosure=false, seed=0))]
+    enclosure=false, seed=0, band_edges=None))]
 #[allow(clippy::too_many_arguments)]
 fn exchange<'py>(
     py: Python<'py>,
@@ -397,6 +420,7 @@ fn exchange<'py>(
     mesh_size: Option<f64>,
     enclosure: bool,
     seed: u64,
+    band_edges: Option<Vec<f64>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mut g = geometry(py, vertices, faces, surfaces, obstructions, two_sided)?;
     let n = g.labels.len();
@@ -417,7 +441,7 @@ fn exchange<'py>(
         }),
     };
     thermal_geometry(py, &mut g, emissivity, Some((&t, &q, &ad)))?;
-    let settings = thermal_settings(method, mesh_size, enclosure, environment, seed)?;
+    let settings = thermal_settings(method, mesh_size, enclosure, environment, seed, band_edges)?;
     let desc = g.desc;
     let th = run(py, move |p| rc::thermal::solve(rc::scene::Scene::from_desc(desc)?, &settings, p))?;
     let (rows, _) = row_order(&g.labels, two_sided, &th.surfaces.iter().map(|s| s.name.clone()).collect::<Vec<_>>());
@@ -432,6 +456,13 @@ fn exchange<'py>(
     d.set_item("heat", col(&|s| s.heat).into_pyarray(py))?;
     d.set_item("radiosity", col(&|s| s.radiosity).into_pyarray(py))?;
     d.set_item("irradiance", col(&|s| s.irradiance).into_pyarray(py))?;
+    if !th.band_edges.is_empty() {
+        let nb = th.band_edges.len() + 1;
+        let rows_b: Vec<Vec<f64>> =
+            rows.iter().map(|r| r.map_or(vec![f64::NAN; nb], |r| th.surfaces[r].band_heat.clone())).collect();
+        d.set_item("band_heat", numpy::PyArray2::from_vec2(py, &rows_b)?)?;
+        d.set_item("band_edges", th.band_edges.clone())?;
+    }
     d.set_item("environment_heat", th.environment_heat)?;
     d.set_item("balance", th.balance)?;
     d.set_item("total", th.total)?;
@@ -467,7 +498,7 @@ fn exchange_factors<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let mut g = geometry(py, vertices, faces, surfaces, obstructions, two_sided)?;
     thermal_geometry(py, &mut g, emissivity, None)?;
-    let settings = thermal_settings(method, mesh_size, enclosure, 0.0, seed)?;
+    let settings = thermal_settings(method, mesh_size, enclosure, 0.0, seed, None)?;
     let desc = g.desc;
     let x = run(py, move |p| rc::thermal::exchange_factors(rc::scene::Scene::from_desc(desc)?, &settings, p))?;
     let (rows, _) = row_order(&g.labels, two_sided, &x.names);

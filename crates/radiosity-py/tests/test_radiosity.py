@@ -109,6 +109,41 @@ def test_exchange_three_surface_network_and_balance():
     assert 300.0 < r["temperature"][2] < 600.0
 
 
+def blackbody_fraction(lt):
+    """Share of blackbody emission below lambda*T (um K), by quadrature of Planck's law."""
+    c2 = 14387.768775
+    x = np.linspace(c2 / lt, c2 / lt + 60.0, 200001)
+    y = x**3 / np.expm1(x)
+    return 15 / math.pi**4 * float(np.sum((y[1:] + y[:-1]) * np.diff(x)) / 2)
+
+
+def test_exchange_in_bands_is_each_band_grey():
+    """Floor and ceiling of the unit cube in two bands (split at 4 um), black walls at 0 K:
+    in each band a grey two-surface exchange of that band's share of the emission, plus
+    what the walls absorb, solved here by hand from the exact factors."""
+    v, f = unit_cube()
+    labels = np.array([0, 1, 2, 2, 2, 2])
+    eps = np.array([[0.9, 0.1], [0.2, 0.9], [1.0, 1.0]])
+    t = np.array([900.0, 300.0, 0.0])
+    r = radiosity.exchange(v, f, eps, temperature=t, surfaces=labels, method="analytic", mesh_size=0,
+                           band_edges=[4.0])
+    f12 = OPPOSITE
+    for b in range(2):
+        share = [blackbody_fraction(4.0 * ti) if ti > 0 else 0.0 for ti in t[:2]]
+        if b == 1:
+            share = [1.0 - s for s in share]
+        e = [SIGMA * share[i] * t[i] ** 4 for i in range(2)]
+        e1, e2 = eps[0, b], eps[1, b]
+        # J1 = e1 E1 + (1 - e1) F12 J2, J2 = e2 E2 + (1 - e2) F12 J1 (the walls send nothing).
+        a = np.array([[1.0, -(1 - e1) * f12], [-(1 - e2) * f12, 1.0]])
+        j = np.linalg.solve(a, [e1 * e[0], e2 * e[1]])
+        q1 = j[0] - f12 * j[1]
+        assert abs(r["band_heat"][0, b] - q1) <= 1e-6 * abs(q1), (b, r["band_heat"][0, b], q1)
+    np.testing.assert_allclose(r["band_heat"].sum(axis=1), r["heat"], rtol=1e-9, atol=1e-9 * r["total"])
+    assert r["band_edges"] == [4.0]
+    assert abs(r["balance"]) <= 1e-9 * r["total"]
+
+
 def test_exchange_factors_close_and_are_reciprocal():
     v, f = unit_cube()
     x = radiosity.exchange_factors(v, f, [0.9, 0.5, 0.7, 0.7, 0.3, 0.3], mesh_size=0.25, enclosure=True)

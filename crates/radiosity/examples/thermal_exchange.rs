@@ -29,7 +29,7 @@ fn main() -> radiosity::Result<()> {
         [(0.8, Boundary::Temperature(600.0)), (0.5, Boundary::Temperature(300.0)), (0.3, Boundary::Adiabatic)];
     for (m, (eps, boundary)) in desc.materials.iter_mut().zip(conditions) {
         m.reflectance = Rgb::splat(1.0 - eps);
-        m.thermal = Some(ThermalDesc { emissivity: Some(eps), boundary: Some(boundary) });
+        m.thermal = Some(ThermalDesc { emissivity: Some(eps), boundary: Some(boundary), ..Default::default() });
     }
     let mut settings = Settings::default();
     settings.view_factors.mesh_size = Some(0.1);

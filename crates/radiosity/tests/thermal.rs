@@ -78,7 +78,7 @@ fn icosphere(r: f64, level: u32, inward: bool) -> Vec<Vec<DVec3>> {
 
 fn material(name: &str, eps: f64, boundary: Boundary) -> MaterialDesc {
     MaterialDesc {
-        thermal: Some(ThermalDesc { emissivity: Some(eps), boundary: Some(boundary) }),
+        thermal: Some(ThermalDesc { emissivity: Some(eps), boundary: Some(boundary), ..Default::default() }),
         ..MaterialDesc::diffuse(name, Rgb::splat(1.0 - eps))
     }
 }
@@ -106,7 +106,7 @@ fn scene(parts: Vec<(&str, MaterialDesc, Vec<Vec<DVec3>>)>) -> Scene {
 fn run(s: Scene, enclosure: bool) -> Thermal {
     let mut vf = VfSettings { per: Per::Element, mesh_size: Some(0.0), enclosure, ..Default::default() };
     vf.form_factors.method = radiosity::form_factor::Method::PointSampled;
-    solve(s, &Settings { view_factors: vf, environment: 0.0 }, &NoProgress).unwrap()
+    solve(s, &Settings { view_factors: vf, environment: 0.0, band_edges: None }, &NoProgress).unwrap()
 }
 
 fn two_surface(a1: f64, a2: f64, e1: f64, e2: f64, t1: f64, t2: f64) -> f64 {
@@ -251,7 +251,7 @@ fn flux_and_adiabatic_surfaces_get_the_temperature_that_carries_their_flux() {
     // A closed room of adiabatic walls around nothing but themselves is undetermined.
     let s = scene(vec![("shell", material("re-radiating", 0.5, Boundary::Adiabatic), icosphere(1.0, 1, true))]);
     let vf = VfSettings { per: Per::Element, mesh_size: Some(0.0), enclosure: true, ..Default::default() };
-    let e = solve(s, &Settings { view_factors: vf, environment: 0.0 }, &NoProgress);
+    let e = solve(s, &Settings { view_factors: vf, environment: 0.0, band_edges: None }, &NoProgress);
     assert!(e.is_err(), "an all-adiabatic enclosure must be refused");
 }
 
@@ -287,7 +287,7 @@ fn re_radiating_walls_match_the_three_surface_network() {
     let load = || radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
     let mut vf = VfSettings { per: Per::Element, mesh_size: Some(0.0), enclosure: false, ..Default::default() };
     vf.form_factors.method = radiosity::form_factor::Method::Analytic;
-    let th = solve(load(), &Settings { view_factors: vf, environment: 0.0 }, &NoProgress).unwrap();
+    let th = solve(load(), &Settings { view_factors: vf, environment: 0.0, band_edges: None }, &NoProgress).unwrap();
     check_balance(&th);
     let q = th.surfaces.iter().find(|s| s.name == "floor").unwrap().heat;
     assert!((q - exact).abs() <= 1e-6 * exact, "one element per surface: {q} vs the network's {exact}");
@@ -307,7 +307,7 @@ fn re_radiating_walls_match_the_three_surface_network() {
 fn run_sized(s: Scene, size: f64) -> Thermal {
     let mut vf = VfSettings { per: Per::Element, mesh_size: Some(size), enclosure: true, ..Default::default() };
     vf.form_factors.method = radiosity::form_factor::Method::PointSampled;
-    solve(s, &Settings { view_factors: vf, environment: 0.0 }, &NoProgress).unwrap()
+    solve(s, &Settings { view_factors: vf, environment: 0.0, band_edges: None }, &NoProgress).unwrap()
 }
 
 /// Gebhart factors and radiative conductances: in a closed enclosure rows sum to 1,
@@ -323,7 +323,7 @@ fn gebhart_factors_close_are_reciprocal_and_carry_the_heat() {
     };
     let mut vf = VfSettings { per: Per::Element, mesh_size: Some(0.0), enclosure: true, ..Default::default() };
     vf.form_factors.method = radiosity::form_factor::Method::PointSampled;
-    let settings = Settings { view_factors: vf, environment: 0.0 };
+    let settings = Settings { view_factors: vf, environment: 0.0, band_edges: None };
     let x = radiosity::thermal::exchange_factors(make(), &settings, &NoProgress).unwrap();
     let th = solve(make(), &settings, &NoProgress).unwrap();
     assert_eq!(x.names, ["inner", "outer"]);
@@ -448,7 +448,7 @@ fn parallel_plates_with_shields_match_the_network_and_fall_as_one_over_n_plus_on
         let s = scene(parts);
         let mut vf = VfSettings { per: Per::Element, mesh_size: Some(0.0), enclosure: false, ..Default::default() };
         vf.form_factors.method = radiosity::form_factor::Method::Adaptive;
-        let th = solve(s, &Settings { view_factors: vf, environment: 0.0 }, &NoProgress).unwrap();
+        let th = solve(s, &Settings { view_factors: vf, environment: 0.0, band_edges: None }, &NoProgress).unwrap();
         // The network: surfaces bottom to top, 0 = hot (up), then each shield's down and up
         // sides, last = cold (down); gap g joins surfaces 2g and 2g + 1. Unknowns: J of each
         // surface, then σT⁴ of each shield.
@@ -501,4 +501,138 @@ fn parallel_plates_with_shields_match_the_network_and_fall_as_one_over_n_plus_on
         // Balance with space: what the plates give up, space receives.
         assert!(th.balance.abs() <= 1e-9 * th.total, "balance {} of {}", th.balance, th.total);
     }
+}
+
+/// A material with one emissivity per band (and a grey value nothing uses).
+fn banded(name: &str, eps: &[f64], boundary: Boundary) -> MaterialDesc {
+    let mut m = material(name, 0.5, boundary);
+    m.thermal.as_mut().unwrap().band_emissivity = eps.to_vec();
+    m
+}
+
+/// Point-sampled factors with the enclosure correction, solved with `edges`.
+fn run_bands(s: Scene, edges: &[f64]) -> Thermal {
+    let mut vf = VfSettings { per: Per::Element, mesh_size: Some(0.0), enclosure: true, ..Default::default() };
+    vf.form_factors.method = radiosity::form_factor::Method::PointSampled;
+    solve(s, &Settings { view_factors: vf, environment: 0.0, band_edges: Some(edges.to_vec()) }, &NoProgress).unwrap()
+}
+
+/// The band-energy closed form for concentric spheres: in each band a grey two-surface
+/// exchange of that band's share of the blackbody emission,
+/// Q = Σ_b σA₁(f_b(T₁)T₁⁴ − f_b(T₂)T₂⁴)/[1/ε₁b + (A₁/A₂)(1/ε₂b − 1)].
+fn two_surface_bands(a1: f64, a2: f64, e1: &[f64], e2: &[f64], t1: f64, t2: f64, edges: &[f64]) -> Vec<f64> {
+    let (f1, f2) = (radiosity::thermal::bands::band_fractions(edges, t1), radiosity::thermal::bands::band_fractions(edges, t2));
+    (0..edges.len() + 1)
+        .map(|b| SIGMA * a1 * (f1[b] * t1.powi(4) - f2[b] * t2.powi(4)) / (1.0 / e1[b] + (a1 / a2) * (1.0 / e2[b] - 1.0)))
+        .collect()
+}
+
+/// Spectrally selective spheres (a hot inner one that emits well in the infrared and
+/// badly below 4 µm, an outer one the other way round): each band's heat is the band
+/// closed form, the bands add up to the total, the enclosure balances. The grey answer
+/// with the Planck-mean emissivities would be far off, so this could fail.
+#[test]
+fn band_emissivities_match_the_band_closed_form() {
+    let (t1, t2, edges) = (1000.0, 300.0, [4.0]);
+    let (e1, e2) = ([0.2, 0.9], [0.8, 0.3]);
+    let s = scene(vec![
+        ("inner", banded("selective", &e1, Boundary::Temperature(t1)), icosphere(0.5, 3, false)),
+        ("outer", banded("shell", &e2, Boundary::Temperature(t2)), icosphere(1.0, 3, true)),
+    ]);
+    let a1: f64 = s.polygons.iter().filter(|p| p.object == 0).map(|p| p.area).sum();
+    let a2: f64 = s.polygons.iter().filter(|p| p.object == 1).map(|p| p.area).sum();
+    let th = run_bands(s, &edges);
+    check_balance(&th);
+    let exact = two_surface_bands(a1, a2, &e1, &e2, t1, t2, &edges);
+    let inner = &th.surfaces[0];
+    eprintln!("two bands: Q per band {:?} vs {exact:?}; total {:.6e}", inner.band_heat, inner.heat);
+    for b in 0..2 {
+        assert!((inner.band_heat[b] - exact[b]).abs() <= 1e-4 * exact[b].abs(), "band {b}: {} vs {}", inner.band_heat[b], exact[b]);
+    }
+    assert!((inner.band_heat.iter().sum::<f64>() - inner.heat).abs() <= 1e-9 * inner.heat.abs());
+    // The reported emissivity is the total one at the surface's temperature.
+    let f1 = radiosity::thermal::bands::band_fractions(&edges, t1);
+    assert!((inner.emissivity - (e1[0] * f1[0] + e1[1] * f1[1])).abs() <= 1e-12);
+    // Grey with that total emissivity is not the answer (a test that could fail).
+    let grey = two_surface(a1, a2, inner.emissivity, th.surfaces[1].emissivity, t1, t2);
+    assert!((grey - inner.heat).abs() > 0.05 * inner.heat, "grey {grey} vs bands {}", inner.heat);
+}
+
+/// A heat-flux surface with band emissivities: its temperature depends on its band shares,
+/// which depend on the temperature. The solve must give the temperature at which the band
+/// closed form carries the flux (found here by bisection), and the flux itself.
+#[test]
+fn a_banded_flux_surface_gets_the_temperature_that_carries_its_flux() {
+    let (q1, t2, edges) = (20_000.0, 300.0, [3.0, 8.0]);
+    let (e1, e2) = ([0.1, 0.5, 0.9], [0.9, 0.6, 0.3]);
+    let s = scene(vec![
+        ("inner", banded("source", &e1, Boundary::HeatFlux(q1)), icosphere(0.5, 3, false)),
+        ("outer", banded("cold", &e2, Boundary::Temperature(t2)), icosphere(1.0, 3, true)),
+    ]);
+    let a1: f64 = s.polygons.iter().filter(|p| p.object == 0).map(|p| p.area).sum();
+    let a2: f64 = s.polygons.iter().filter(|p| p.object == 1).map(|p| p.area).sum();
+    let th = run_bands(s, &edges);
+    check_balance(&th);
+    assert!((th.surfaces[0].heat_flux - q1).abs() <= 1e-9 * q1, "{}", th.surfaces[0].heat_flux);
+    let (mut lo, mut hi) = (t2, 5000.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if two_surface_bands(a1, a2, &e1, &e2, mid, t2, &edges).iter().sum::<f64>() < q1 * a1 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let got = th.surfaces[0].temperature;
+    eprintln!("banded flux surface: T1 {got:.6} K vs closed form {lo:.6} K");
+    assert!((got - lo).abs() <= 1e-4 * lo, "T1 {got} vs {lo}");
+}
+
+/// With the same emissivity in every band, bands change nothing: the grey solution, with
+/// heat-flux and adiabatic surfaces too (three spheres inside a fourth), to rounding.
+#[test]
+fn grey_materials_in_bands_are_the_grey_solution() {
+    let at = |r: f64, c: DVec3| icosphere(r, 2, false).into_iter().map(|p| p.into_iter().map(|v| v + c).collect()).collect();
+    let make = || {
+        scene(vec![
+            ("source", material("source", 0.7, Boundary::HeatFlux(3000.0)), at(0.25, DVec3::new(-0.4, 0.0, 0.0))),
+            ("warm", banded("grey in bands", &[0.4, 0.4, 0.4], Boundary::Temperature(450.0)), at(0.25, DVec3::new(0.4, 0.0, 0.0))),
+            ("floating", material("re-radiating", 0.6, Boundary::Adiabatic), at(0.2, DVec3::new(0.0, 0.5, 0.0))),
+            ("outer", material("cold", 0.5, Boundary::Temperature(300.0)), icosphere(1.0, 2, true)),
+        ])
+    };
+    let grey = {
+        let mut s = make();
+        // The same material given grey.
+        s.materials[1].thermal.as_mut().unwrap().band_emissivity.clear();
+        s.materials[1].thermal.as_mut().unwrap().emissivity = 0.4;
+        run_bands(s, &[])
+    };
+    let bands = run_bands(make(), &[2.0, 6.0]);
+    check_balance(&bands);
+    for (g, b) in grey.surfaces.iter().zip(&bands.surfaces) {
+        assert!((g.heat - b.heat).abs() <= 1e-9 * grey.total, "{}: {} vs {}", g.name, g.heat, b.heat);
+        assert!((g.temperature - b.temperature).abs() <= 1e-9 * g.temperature, "{}: T {} vs {}", g.name, g.temperature, b.temperature);
+    }
+}
+
+#[test]
+fn band_mistakes_are_named_before_any_work() {
+    let two = || {
+        scene(vec![
+            ("inner", banded("selective", &[0.2, 0.9], Boundary::Temperature(900.0)), icosphere(0.5, 1, false)),
+            ("outer", material("cold", 0.5, Boundary::Temperature(300.0)), icosphere(1.0, 1, true)),
+        ])
+    };
+    let with = |edges: Option<Vec<f64>>| Settings { band_edges: edges, ..Settings::default() };
+    // Two values but three bands; no bands at all; edges that go down.
+    let e = solve(two(), &with(Some(vec![3.0, 8.0])), &NoProgress).unwrap_err().to_string();
+    assert!(e.contains("'selective'") && e.contains("2 band emissivities for 3 band(s)"), "{e}");
+    let e = solve(two(), &with(None), &NoProgress).unwrap_err().to_string();
+    assert!(e.contains("no band edges"), "{e}");
+    let e = solve(two(), &with(Some(vec![8.0, 3.0])), &NoProgress).unwrap_err().to_string();
+    assert!(e.contains("must increase"), "{e}");
+    // Grey-only computations refuse a banded material.
+    let e = radiosity::thermal::exchange_factors(two(), &with(Some(vec![4.0])), &NoProgress).unwrap_err().to_string();
+    assert!(e.contains("per-band emissivities"), "{e}");
 }

@@ -265,3 +265,26 @@ fn non_physical_values_are_rejected_with_their_line() {
     err_at("cam3.toml", &format!("{cam}look_at = [0, 0, nan]\nvfov_deg = 40\n"), 2);
     err_at("cam4.toml", &format!("{cam}look_at = [0, 1, 0]\nvfov_deg = 40\n"), 2);
 }
+
+#[test]
+fn thermal_bands_are_read_and_checked_at_their_line() {
+    let mtl = "newmtl hot\nKd 0.5 0.5 0.5\n";
+    let obj = "mtllib b.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nusemtl hot\nf 1 2 3\n";
+    std::fs::write(tmp("b.mtl"), mtl).unwrap();
+    std::fs::write(tmp("b.obj"), obj).unwrap();
+    let good = write("bands.toml", "mesh = \"b.obj\"\n[thermal]\nband_edges = [3.0, 8.0]\n[materials.hot]\nemissivity = [0.1, 0.5, 0.9]\ntemperature = 500\n");
+    let desc = radiosity::scene::load(good.to_str().unwrap()).unwrap();
+    assert_eq!(desc.band_edges, vec![3.0, 8.0]);
+    assert_eq!(desc.materials[0].thermal.as_ref().unwrap().band_emissivity, vec![0.1, 0.5, 0.9]);
+    let scene = radiosity::scene::Scene::from_desc(desc).unwrap();
+    assert_eq!(scene.materials[0].thermal.as_ref().unwrap().band_emissivity, vec![0.1, 0.5, 0.9]);
+    // Edges that go down, at the [thermal] table; one value in a list, at the value.
+    let e = err_at("bands-down.toml", "mesh = \"b.obj\"\n[thermal]\nband_edges = [8.0, 3.0]\n", 2);
+    assert!(e.contains("band_edges") && e.contains("increasing"), "{e}");
+    let e = err_at("bands-one.toml", "mesh = \"b.obj\"\n[materials.hot]\nemissivity = [0.5]\ntemperature = 500\n", 3);
+    assert!(e.contains("one per band"), "{e}");
+    // A band emissivity out of range is named by validation.
+    let bad = write("bands-range.toml", "mesh = \"b.obj\"\n[materials.hot]\nemissivity = [0.5, 1.5]\ntemperature = 500\n");
+    let e = radiosity::scene::Scene::from_desc(radiosity::scene::load(bad.to_str().unwrap()).unwrap()).unwrap_err().to_string();
+    assert!(e.contains("band emissivity 1.5"), "{e}");
+}

@@ -56,7 +56,7 @@ fn total_exchange_factors_of_concentric_spheres_are_the_closed_form() {
 fn settings(mesh_size: Option<f64>, enclosure: bool) -> Settings {
     let mut vf = VfSettings { per: Per::Element, mesh_size, enclosure, ..Default::default() };
     vf.form_factors.method = radiosity::form_factor::Method::PointSampled;
-    Settings { view_factors: vf, environment: 0.0 }
+    Settings { view_factors: vf, environment: 0.0, band_edges: None }
 }
 
 fn temperature_file(name: &str, text: &str) -> PathBuf {

@@ -163,10 +163,14 @@ pub struct MaterialDesc {
 }
 
 /// Thermal properties of a material as written ([`crate::thermal`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct ThermalDesc {
     /// Hemispherical emissivity ε in [0, 1] (None: 1 − the mean reflectance).
     pub emissivity: Option<f64>,
+    /// Emissivity in each wavelength band (TOML `emissivity = [ε₁, ε₂, …]`) of a solve
+    /// whose spectrum is split at [`SceneDesc::band_edges`]; empty: grey (`emissivity` in
+    /// every band).
+    pub band_emissivity: Vec<f64>,
     /// The boundary condition (None: the material takes no part in a thermal solve).
     pub boundary: Option<Boundary>,
 }
@@ -183,10 +187,15 @@ pub enum Boundary {
 }
 
 /// A validated thermal specification: emissivity and boundary condition.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ThermalSpec {
-    /// Emissivity ε in [0, 1].
+    /// Emissivity ε in [0, 1] (grey; for a material with per-band values, what the grey
+    /// default would be: used by nothing, see [`ThermalSpec::band_emissivity`]).
     pub emissivity: f64,
+    /// Emissivity per wavelength band, each in [0, 1]; empty: grey. Computations that
+    /// have no bands (Gebhart factors, View3D's emittance-weighted factors, a thermal solve
+    /// without band edges) refuse a material that has them.
+    pub band_emissivity: Vec<f64>,
     /// The boundary condition.
     pub boundary: Boundary,
 }
@@ -366,6 +375,9 @@ pub struct SceneDesc {
     pub lights: Vec<Light>,
     /// Decoded textures, indexed by [`TextureRef::texture`].
     pub textures: Vec<Arc<Texture>>,
+    /// Wavelengths in µm, increasing, that split the spectrum into bands for a thermal
+    /// solve with per-band emissivities (TOML `[thermal] band_edges`; empty: grey).
+    pub band_edges: Vec<f64>,
 }
 
 /// A validated material.
@@ -471,6 +483,8 @@ pub struct Scene {
     pub lights: Vec<Light>,
     /// Decoded textures ([`Material::base_texture`], [`Material::emission_texture`]).
     pub textures: Vec<Arc<Texture>>,
+    /// Thermal band edges in µm (validated: finite, positive, increasing).
+    pub band_edges: Vec<f64>,
 }
 
 impl Scene {

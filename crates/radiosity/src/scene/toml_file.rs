@@ -19,8 +19,13 @@
 //!                              # --two-sided): a lamp stays one-sided in a two-sided room
 //!
 //! # Thermal (`radiosity thermal`; see crate::thermal), per material:
-//! # emissivity = 0.8           # hemispherical ε in [0, 1] (default 1 − mean reflectance)
+//! # emissivity = 0.8           # hemispherical ε in [0, 1] (default 1 − mean reflectance),
+//! #                            # or one per band: emissivity = [0.1, 0.9] (see [thermal])
 //! # temperature = 500          # kelvin; or heat_flux = 1000 (W/m² leaving); or adiabatic = true
+//! #
+//! # [thermal]                  # optional, scene-wide
+//! # band_edges = [4.0]         # µm: the spectrum split into bands (here 0–4 µm, 4 µm–∞)
+//! #                            # for per-band emissivities (the CLI's --bands overrides)
 //!
 //! [sky]                        # optional: a uniform sky around the geometry
 //! radiance = 1.0               # radiance of every direction that sees no polygon
@@ -98,6 +103,24 @@ struct FileToml {
     sky: Option<Spanned<SkyToml>>,
     #[serde(default)]
     lights: Vec<Spanned<LightToml>>,
+    thermal: Option<Spanned<ThermalToml>>,
+}
+
+/// `[thermal]`: scene-wide settings of a thermal solve.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ThermalToml {
+    /// Wavelengths (µm) that split the spectrum into bands.
+    #[serde(default)]
+    band_edges: Vec<f64>,
+}
+
+/// A material's `emissivity`: one grey value, or one per band.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum EmissivityToml {
+    Grey(f64),
+    Bands(Vec<f64>),
 }
 
 #[derive(Deserialize)]
@@ -161,7 +184,7 @@ struct MaterialToml {
     reflectance: Option<Spanned<[f64; 3]>>,
     emission: Option<Spanned<[f64; 3]>>,
     two_sided: Option<bool>,
-    emissivity: Option<f64>,
+    emissivity: Option<Spanned<EmissivityToml>>,
     temperature: Option<f64>,
     heat_flux: Option<f64>,
     adiabatic: Option<bool>,
@@ -349,6 +372,16 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
         }
         desc.sky = Some(super::Sky { radiance, sun });
     }
+    if let Some(th) = &spec.thermal {
+        let edges = &th.get_ref().band_edges;
+        if edges.iter().any(|e| !(e.is_finite() && *e > 0.0)) || edges.windows(2).any(|w| !(w[1] > w[0])) {
+            return Err(Error::input(
+                at(th.span()),
+                format!("[thermal]: band_edges {edges:?} must be positive wavelengths in µm, increasing"),
+            ));
+        }
+        desc.band_edges = edges.clone();
+    }
 
     for (name, ov) in &spec.materials {
         let loc = at(ov.span());
@@ -395,14 +428,27 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
                 format!("[materials.{name}]: give one of temperature, heat_flux and adiabatic = true, not several"),
             ));
         }
+        let (emissivity, band_emissivity) = match ov.emissivity.as_ref().map(|e| e.get_ref()) {
+            Some(EmissivityToml::Grey(e)) => (Some(*e), Vec::new()),
+            Some(EmissivityToml::Bands(b)) => (None, b.clone()),
+            None => (None, Vec::new()),
+        };
+        if let Some(e) = &ov.emissivity {
+            if matches!(e.get_ref(), EmissivityToml::Bands(b) if b.len() < 2) {
+                return Err(Error::input(
+                    at(e.span()),
+                    format!("[materials.{name}]: emissivity: give one number (grey), or one per band (at least two)"),
+                ));
+            }
+        }
         let thermal = (ov.emissivity.is_some() || !given.is_empty())
-            .then(|| super::ThermalDesc { emissivity: ov.emissivity, boundary: given.first().copied() });
+            .then(|| super::ThermalDesc { emissivity, band_emissivity, boundary: given.first().copied() });
         let mut found = false;
         for (i, m) in desc.materials.iter_mut().enumerate().filter(|(_, m)| &m.name == name) {
             found = true;
             apply(m, reflectance, emission, ov.two_sided, &loc);
             if thermal.is_some() {
-                m.thermal = thermal;
+                m.thermal = thermal.clone();
                 m.loc = Some(loc.clone());
             }
             if reflectance.is_some() {

@@ -30,6 +30,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
         sky,
         lights,
         textures,
+        band_edges,
     } = desc;
     // The scene's file: where its polygons came from (built-in scenes: the name).
     let file = polygons.iter().find_map(|p| p.loc.as_ref().map(|l| l.file.clone())).unwrap_or_else(|| name.clone().into());
@@ -104,24 +105,31 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
             Some((r, f)) => textures[r.texture as usize].mean * *f,
             None => c,
         };
-        let thermal = match m.thermal {
-            Some(ThermalDesc { emissivity, boundary: Some(boundary) }) => {
+        let thermal = match &m.thermal {
+            Some(ThermalDesc { emissivity, band_emissivity, boundary: Some(boundary) }) => {
+                let boundary = *boundary;
                 let eps = emissivity.unwrap_or_else(|| 1.0 - (reflectance.x + reflectance.y + reflectance.z) / 3.0);
                 let bad = |msg: String| Error::input(here(&m.loc), format!("material '{}': {msg}", m.name));
                 if !(0.0..=1.0).contains(&eps) {
                     return Err(bad(format!("emissivity {eps} must be between 0 and 1")));
+                }
+                if let Some(e) = band_emissivity.iter().find(|e| !(0.0..=1.0).contains(*e)) {
+                    return Err(bad(format!("band emissivity {e} must be between 0 and 1")));
+                }
+                if band_emissivity.len() == 1 {
+                    return Err(bad("one band emissivity: give one number for a grey surface, or one per band".into()));
                 }
                 match boundary {
                     Boundary::Temperature(t) if !(t.is_finite() && t >= 0.0) => {
                         return Err(bad(format!("temperature {t} K must be finite and ≥ 0 (kelvin)")))
                     }
                     Boundary::HeatFlux(q) if !q.is_finite() => return Err(bad(format!("heat flux {q} must be finite"))),
-                    Boundary::HeatFlux(q) if q != 0.0 && eps <= 0.0 => {
+                    Boundary::HeatFlux(q) if q != 0.0 && (band_emissivity.is_empty() && eps <= 0.0 || !band_emissivity.is_empty() && band_emissivity.iter().all(|e| *e <= 0.0)) => {
                         return Err(bad("a surface of emissivity 0 cannot emit or absorb a heat flux".into()))
                     }
                     _ => {}
                 }
-                Some(ThermalSpec { emissivity: eps, boundary })
+                Some(ThermalSpec { emissivity: eps, band_emissivity: band_emissivity.clone(), boundary })
             }
             _ => None,
         };
@@ -379,7 +387,13 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     }
     obstructions.sort_unstable();
     obstructions.dedup();
-    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions, file, lost_light, sky, lights, textures })
+    if let Some(w) = band_edges.windows(2).find(|w| !(w[1] > w[0])) {
+        return Err(Error::Invalid(format!("thermal band edges must increase: {} µm then {} µm", w[0], w[1])));
+    }
+    if let Some(e) = band_edges.iter().find(|e| !(e.is_finite() && **e > 0.0)) {
+        return Err(Error::Invalid(format!("thermal band edge {e} µm must be finite and positive")));
+    }
+    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions, file, lost_light, sky, lights, textures, band_edges })
 }
 
 /// Polygons skipped for one reason: how many, and the first.

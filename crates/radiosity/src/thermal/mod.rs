@@ -31,10 +31,11 @@ use faer::{Mat, Par};
 
 use crate::form_factor::diagnostics::Diagnostics;
 use crate::form_factor::enclosure::EnclosureReport;
-use crate::scene::{Boundary, Scene, SceneDesc, ThermalDesc};
+use crate::scene::{Boundary, Scene, SceneDesc, ThermalDesc, ThermalSpec};
 use crate::view_factors::{Job, Per, Settings as VfSettings};
 use crate::{Error, Progress, Result};
 
+pub mod bands;
 pub mod viewht;
 
 /// The Stefan–Boltzmann constant σ, W/(m²·K⁴) (CODATA 2018, exact in the SI).
@@ -50,11 +51,14 @@ pub struct Settings {
     pub view_factors: VfSettings,
     /// Temperature of the environment that takes the rest of each row, kelvin.
     pub environment: f64,
+    /// Wavelengths (µm) that split the spectrum into bands for per-band emissivities
+    /// (None: the scene's own, [`Scene::band_edges`]; empty: grey).
+    pub band_edges: Option<Vec<f64>>,
 }
 
 impl Default for Settings {
     fn default() -> Self {
-        Settings { view_factors: VfSettings { per: Per::Element, ..Default::default() }, environment: 0.0 }
+        Settings { view_factors: VfSettings { per: Per::Element, ..Default::default() }, environment: 0.0, band_edges: None }
     }
 }
 
@@ -68,7 +72,8 @@ pub struct SurfaceResult {
     pub boundary: &'static str,
     /// Area, scene units².
     pub area: f64,
-    /// Emissivity (area mean over the surface's elements).
+    /// Emissivity (area mean over the surface's elements; with bands the total hemispherical
+    /// emissivity Σ_b ε_b f_b(T) at each element's temperature).
     pub emissivity: f64,
     /// Temperature, K (given, or solved for flux and adiabatic surfaces).
     pub temperature: f64,
@@ -80,6 +85,9 @@ pub struct SurfaceResult {
     pub radiosity: f64,
     /// Area-mean irradiance G, W per unit area.
     pub irradiance: f64,
+    /// With bands: the net heat leaving in each band, W (they sum to `heat`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub band_heat: Vec<f64>,
 }
 
 /// A solved enclosure.
@@ -95,6 +103,9 @@ pub struct Thermal {
     pub total: f64,
     /// Elements of the system.
     pub elements: usize,
+    /// The band edges the exchange was solved with, µm (empty: grey).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub band_edges: Vec<f64>,
     /// The view factors' diagnostics (row sums, reciprocity).
     #[serde(skip)]
     pub diagnostics: Diagnostics,
@@ -104,7 +115,9 @@ pub struct Thermal {
 }
 
 /// Solves the grey-body exchange of `scene`: every non-obstruction surface needs a
-/// boundary condition ([`crate::scene::Material::thermal`]).
+/// boundary condition ([`crate::scene::Material::thermal`]). With band edges
+/// ([`Settings::band_edges`], else the scene's `[thermal] band_edges`) the exchange is
+/// solved band by band (see [`bands`]).
 pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Thermal> {
     let sigma = STEFAN_BOLTZMANN;
     if !(settings.environment.is_finite() && settings.environment >= 0.0) {
@@ -113,12 +126,22 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
             settings.environment
         )));
     }
-    // Every material used by a surface needs a boundary condition.
+    let edges = settings.band_edges.clone().unwrap_or_else(|| scene.band_edges.clone());
+    bands::check_edges(&edges)?;
+    // Every material used by a surface needs a boundary condition (and, with bands, one
+    // emissivity per band or a grey one).
     let mut missing: Vec<String> = Vec::new();
     for p in &scene.polygons {
         let m = &scene.materials[p.material as usize];
-        if m.thermal.is_none() && !scene.is_obstruction(p.object) && !missing.contains(&m.name) {
-            missing.push(m.name.clone());
+        if scene.is_obstruction(p.object) {
+            continue;
+        }
+        match &m.thermal {
+            None if !missing.contains(&m.name) => missing.push(m.name.clone()),
+            Some(t) if !t.band_emissivity.is_empty() && t.band_emissivity.len() != edges.len() + 1 => {
+                return Err(bands::count_error(&m.name, t.band_emissivity.len(), &edges));
+            }
+            _ => {}
         }
     }
     if !missing.is_empty() {
@@ -142,38 +165,18 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
     let mesh = job.mesh();
     let f = &vfs.matrix;
     let env = sigma * settings.environment.powi(4);
-    // Per element: emissivity, coefficient of Σ F J, right-hand side.
-    let mut eps = vec![0.0; n];
-    let mut coef = vec![0.0; n];
-    let mut rhs = vec![0.0; n];
+    // Per element: boundary condition, emissivity (grey), what leaves the geometry.
+    let mut spec = Vec::with_capacity(n);
     let mut f_env = vec![0.0; n];
     for (r, &e) in elements.iter().enumerate() {
         let p = &scene.polygons[mesh.elements[e as usize].patch as usize];
         let m = &scene.materials[p.material as usize];
-        let spec = m.thermal.as_ref().ok_or_else(|| Error::Invalid("missing boundary condition".into()))?;
+        spec.push(m.thermal.as_ref().ok_or_else(|| Error::Invalid("missing boundary condition".into()))?);
         let rowsum: f64 = f.row(r).iter().sum();
         f_env[r] = (1.0 - rowsum).max(0.0);
-        eps[r] = spec.emissivity;
-        match spec.boundary {
-            Boundary::Temperature(t) => {
-                coef[r] = 1.0 - spec.emissivity;
-                rhs[r] = spec.emissivity * sigma * t.powi(4) + (1.0 - spec.emissivity) * f_env[r] * env;
-            }
-            Boundary::HeatFlux(q) => {
-                coef[r] = 1.0;
-                rhs[r] = q + f_env[r] * env;
-            }
-            Boundary::Adiabatic => {
-                coef[r] = 1.0;
-                rhs[r] = f_env[r] * env;
-            }
-        }
     }
     // Without a temperature anywhere, only the environment can fix the level of J.
-    let any_t = elements.iter().any(|&e| {
-        let p = &scene.polygons[mesh.elements[e as usize].patch as usize];
-        matches!(scene.materials[p.material as usize].thermal.map(|t| t.boundary), Some(Boundary::Temperature(_)))
-    });
+    let any_t = spec.iter().any(|s| matches!(s.boundary, Boundary::Temperature(_)));
     let open: f64 = elements.iter().zip(&f_env).map(|(&e, fe)| mesh.elements[e as usize].area * fe).sum();
     let area: f64 = elements.iter().map(|&e| mesh.elements[e as usize].area).sum();
     if !any_t && open <= 1e-9 * area {
@@ -183,22 +186,7 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
                 .into(),
         ));
     }
-    // A J = b with A = I − diag(coef) F.
-    let mut a = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - coef[i] * f.get(i, j));
-    // Shields: the two sides of a thin adiabatic sheet share a temperature and pass the heat
-    // through, J_f − (1 − ε)G_f = J_b − (1 − ε)G_b and (J_f − G_f) + (J_b − G_b) = 0.
     let pairs = shield_pairs(scene, mesh, &elements);
-    for &(rf, rb) in &pairs {
-        let c = 1.0 - eps[rf];
-        for k in 0..n {
-            let (ff, fb) = (f.get(rf, k), f.get(rb, k));
-            let d = |r: usize| if k == r { 1.0 } else { 0.0 };
-            a[(rf, k)] = d(rf) - d(rb) - c * ff + c * fb;
-            a[(rb, k)] = d(rf) + d(rb) - ff - fb;
-        }
-        rhs[rf] = c * (f_env[rf] - f_env[rb]) * env;
-        rhs[rb] = (f_env[rf] + f_env[rb]) * env;
-    }
     let shield: Vec<bool> = {
         let mut v = vec![false; n];
         for &(x, y) in &pairs {
@@ -207,57 +195,58 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
         }
         v
     };
-    let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
-    lu_solve_dense(a, &mut x);
-    let j: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
-    if j.iter().any(|v| !v.is_finite()) {
-        return Err(Error::Invalid(
-            "the thermal system is singular: with only heat-flux and adiabatic surfaces in a closed enclosure the \
-             temperatures are undetermined; give at least one surface a temperature"
-                .into(),
-        ));
-    }
+    // Per element: total radiosity J, irradiance G, T⁴, emissivity (total, at T), and
+    // with bands the net flux per band.
+    let el = if edges.is_empty() {
+        grey(f, &spec, &f_env, &pairs, env)?
+    } else {
+        if !pairs.is_empty() {
+            return Err(Error::Invalid(
+                "radiation shields (two-sided adiabatic materials) are solved grey only: leave out the band edges, or \
+                 give the shield a heat flux"
+                    .into(),
+            ));
+        }
+        bands::solve(f, &spec, &f_env, &edges, settings.environment)?
+    };
     // Per surface (object and side).
+    let nb = el.band_q.first().map_or(0, |b| b.len());
     let mut order: Vec<(u32, bool)> = Vec::new();
-    let mut acc: std::collections::HashMap<(u32, bool), [f64; 7]> = std::collections::HashMap::new();
+    let mut acc: std::collections::HashMap<(u32, bool), ([f64; 7], Vec<f64>)> = std::collections::HashMap::new();
     let mut q_env = 0.0;
     for (r, &e) in elements.iter().enumerate() {
-        let el = &mesh.elements[e as usize];
-        let p = &scene.polygons[el.patch as usize];
-        let m = &scene.materials[p.material as usize];
-        let g: f64 = f.row(r).iter().zip(&j).map(|(fv, jv)| fv * jv).sum::<f64>() + f_env[r] * env;
-        let q = j[r] - g;
-        let t4 = match m.thermal.as_ref().map(|s| s.boundary) {
-            Some(Boundary::Temperature(t)) => t.powi(4),
-            _ if eps[r] > 0.0 => ((j[r] - (1.0 - eps[r]) * g) / (eps[r] * sigma)).max(0.0),
-            _ => f64::NAN,
-        };
-        let a = el.area;
-        q_env += a * f_env[r] * (j[r] - env);
+        let element = &mesh.elements[e as usize];
+        let p = &scene.polygons[element.patch as usize];
+        let (j, g) = (el.j[r], el.g[r]);
+        let a = element.area;
+        q_env += a * f_env[r] * (j - env);
         let key = (p.object, p.back_side);
-        let s = acc.entry(key).or_insert_with(|| {
+        let (s, band) = acc.entry(key).or_insert_with(|| {
             order.push(key);
-            [0.0; 7]
+            ([0.0; 7], vec![0.0; nb])
         });
         s[0] += a;
-        s[1] += a * eps[r];
-        s[2] += a * t4;
-        s[3] += a * q;
-        s[4] += a * j[r];
+        s[1] += a * el.eps[r];
+        s[2] += a * el.t4[r];
+        s[3] += a * (j - g);
+        s[4] += a * j;
         s[5] += a * g;
-        s[6] = match m.thermal.as_ref().map(|s| s.boundary) {
-            Some(Boundary::Temperature(_)) => 0.0,
-            Some(Boundary::HeatFlux(_)) => 1.0,
+        s[6] = match spec[r].boundary {
+            Boundary::Temperature(_) => 0.0,
+            Boundary::HeatFlux(_) => 1.0,
             _ if shield[r] => 3.0,
             _ => 2.0,
         };
+        for (b, q) in band.iter_mut().zip(el.band_q.get(r).into_iter().flatten()) {
+            *b += a * q;
+        }
     }
     order.sort();
     let two_sided = scene.polygons.iter().any(|p| p.back_side);
     let surfaces: Vec<SurfaceResult> = order
         .iter()
         .map(|key| {
-            let s = acc[key];
+            let (s, band) = &acc[key];
             let name = &scene.objects[key.0 as usize].name;
             SurfaceResult {
                 name: if two_sided && key.1 { format!("{name} (back)") } else { name.clone() },
@@ -269,6 +258,7 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
                 heat: s[3],
                 radiosity: s[4] / s[0],
                 irradiance: s[5] / s[0],
+                band_heat: band.clone(),
             }
         })
         .collect();
@@ -280,9 +270,92 @@ pub fn solve(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Resu
         balance: sum_q - q_env,
         total,
         elements: n,
+        band_edges: edges,
         diagnostics: vfs.diagnostics,
         enclosure: vfs.enclosure,
     })
+}
+
+/// An element solution: total radiosity `J`, irradiance `G`, `T⁴`, the emissivity (with
+/// bands: the total hemispherical emissivity at the element's temperature) and, with
+/// bands, the net flux leaving in each band.
+pub(crate) struct ElementSolution {
+    pub j: Vec<f64>,
+    pub g: Vec<f64>,
+    pub t4: Vec<f64>,
+    pub eps: Vec<f64>,
+    pub band_q: Vec<Vec<f64>>,
+}
+
+/// The grey system: one unknown `J` per element, dense LU.
+fn grey(f: &crate::transport::DenseMatrix, spec: &[&ThermalSpec], f_env: &[f64], pairs: &[(usize, usize)], env: f64) -> Result<ElementSolution> {
+    let sigma = STEFAN_BOLTZMANN;
+    let n = spec.len();
+    if let Some(s) = spec.iter().find(|s| !s.band_emissivity.is_empty()) {
+        return Err(Error::Invalid(format!(
+            "a material gives {} band emissivities but the solve has no band edges: give [thermal] band_edges in the \
+             scene or --bands",
+            s.band_emissivity.len()
+        )));
+    }
+    // Per element: emissivity, coefficient of Σ F J, right-hand side.
+    let eps: Vec<f64> = spec.iter().map(|s| s.emissivity).collect();
+    let mut coef = vec![0.0; n];
+    let mut rhs = vec![0.0; n];
+    for r in 0..n {
+        match spec[r].boundary {
+            Boundary::Temperature(t) => {
+                coef[r] = 1.0 - eps[r];
+                rhs[r] = eps[r] * sigma * t.powi(4) + (1.0 - eps[r]) * f_env[r] * env;
+            }
+            Boundary::HeatFlux(q) => {
+                coef[r] = 1.0;
+                rhs[r] = q + f_env[r] * env;
+            }
+            Boundary::Adiabatic => {
+                coef[r] = 1.0;
+                rhs[r] = f_env[r] * env;
+            }
+        }
+    }
+    // A J = b with A = I − diag(coef) F.
+    let mut a = Mat::<f64>::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 } - coef[i] * f.get(i, j));
+    // Shields: the two sides of a thin adiabatic sheet share a temperature and pass the heat
+    // through, J_f − (1 − ε)G_f = J_b − (1 − ε)G_b and (J_f − G_f) + (J_b − G_b) = 0.
+    for &(rf, rb) in pairs {
+        let c = 1.0 - eps[rf];
+        for k in 0..n {
+            let (ff, fb) = (f.get(rf, k), f.get(rb, k));
+            let d = |r: usize| if k == r { 1.0 } else { 0.0 };
+            a[(rf, k)] = d(rf) - d(rb) - c * ff + c * fb;
+            a[(rb, k)] = d(rf) + d(rb) - ff - fb;
+        }
+        rhs[rf] = c * (f_env[rf] - f_env[rb]) * env;
+        rhs[rb] = (f_env[rf] + f_env[rb]) * env;
+    }
+    let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
+    lu_solve_dense(a, &mut x);
+    let j: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
+    if j.iter().any(|v| !v.is_finite()) {
+        return Err(singular());
+    }
+    let g: Vec<f64> = (0..n).map(|r| f.row(r).iter().zip(&j).map(|(fv, jv)| fv * jv).sum::<f64>() + f_env[r] * env).collect();
+    let t4 = (0..n)
+        .map(|r| match spec[r].boundary {
+            Boundary::Temperature(t) => t.powi(4),
+            _ if eps[r] > 0.0 => ((j[r] - (1.0 - eps[r]) * g[r]) / (eps[r] * sigma)).max(0.0),
+            _ => f64::NAN,
+        })
+        .collect();
+    Ok(ElementSolution { j, g, t4, eps, band_q: Vec::new() })
+}
+
+fn singular() -> Error {
+    Error::Invalid(
+        "the thermal system is singular: with only heat-flux and adiabatic surfaces in a closed enclosure the \
+         temperatures are undetermined; give at least one surface a temperature"
+            .into(),
+    )
 }
 
 /// The objects that are surfaces of a thermal solve (every object but the obstructions),
@@ -317,8 +390,9 @@ pub fn set_temperatures(desc: &mut SceneDesc, t: &[Option<f64>]) -> Result<()> {
         let index = *copies.entry((m, o)).or_insert(next);
         if index == next {
             let mut copy = desc.materials[m as usize].clone();
-            let emissivity = copy.thermal.and_then(|t| t.emissivity);
-            copy.thermal = Some(ThermalDesc { emissivity, boundary: Some(Boundary::Temperature(v)) });
+            let (emissivity, band_emissivity) =
+                copy.thermal.take().map(|t| (t.emissivity, t.band_emissivity)).unwrap_or_default();
+            copy.thermal = Some(ThermalDesc { emissivity, band_emissivity, boundary: Some(Boundary::Temperature(v)) });
             copy.name = format!("{} ({})", copy.name, desc.objects[o as usize].name);
             desc.materials.push(copy);
         }
@@ -400,7 +474,7 @@ fn shield_pairs(scene: &Scene, mesh: &crate::mesh::Mesh, elements: &[u32]) -> Ve
         let el = &mesh.elements[e as usize];
         let p = &scene.polygons[el.patch as usize];
         let m = &scene.materials[p.material as usize];
-        if !(m.two_sided && matches!(m.thermal.map(|t| t.boundary), Some(Boundary::Adiabatic))) {
+        if !(m.two_sided && matches!(m.thermal.as_ref().map(|t| t.boundary), Some(Boundary::Adiabatic))) {
             continue;
         }
         let q = (el.centroid / (1e-7 * diag)).round().to_array().map(|x| x as i64);
@@ -445,6 +519,13 @@ pub struct Exchange {
 /// Gebhart factors and radiative conductances of `scene`'s surfaces (emissivity from the
 /// materials' thermal data, else `1 − ` mean reflectance; no boundary condition needed).
 pub fn exchange_factors(scene: Scene, settings: &Settings, progress: &dyn Progress) -> Result<Exchange> {
+    // Refused before any work.
+    if let Some(m) = scene.polygons.iter().map(|p| &scene.materials[p.material as usize]).find(|m| m.thermal.as_ref().is_some_and(|t| !t.band_emissivity.is_empty())) {
+        return Err(Error::Invalid(format!(
+            "material '{}' has per-band emissivities: Gebhart factors and conductances are grey (give it one emissivity)",
+            m.name
+        )));
+    }
     let vf = VfSettings { per: Per::Element, ..settings.view_factors.clone() };
     let job = Job::new(scene, vf)?;
     let n = job.len();
@@ -462,8 +543,7 @@ pub fn exchange_factors(scene: Scene, settings: &Settings, progress: &dyn Progre
         .iter()
         .map(|&e| {
             let m = &scene.materials[scene.polygons[mesh.elements[e as usize].patch as usize].material as usize];
-            m.thermal
-                .map_or_else(|| 1.0 - (m.reflectance.x + m.reflectance.y + m.reflectance.z) / 3.0, |t| t.emissivity)
+            m.thermal.as_ref().map_or_else(|| 1.0 - (m.reflectance.x + m.reflectance.y + m.reflectance.z) / 3.0, |t| t.emissivity)
         })
         .collect();
     let b = gebhart_matrix(n, |i, j| f.get(i, j), &eps);
