@@ -4,7 +4,7 @@
 //! H_direct(x) = Σ_emitters π·L_e,Q · F(dA_x → Q) · V̂(x, Q)
 //! ```
 //!
-//! with `F(dA_x → Q)` the contour integral ([`crate::geom::kernel`]) and `V̂` the fraction
+//! with `F(dA_x → Q)` the contour integral ([`crate::form_factor::analytic::point_factor`]) and `V̂` the fraction
 //! of stratified shadow rays that reach the emitter (many emitters: rays picked in
 //! proportion to each one's unoccluded contribution). Used by the final gather
 //! ([`crate::render::gather`]) per pixel and by a-priori mesh refinement

@@ -16,6 +16,25 @@
 //!
 //! The library never prints and never exits: errors are typed ([`Error`], with file:line for
 //! input errors), progress and cancellation go through [`progress::Progress`].
+//!
+//! ## The public API (what the CLI, the Python package and `examples/` call)
+//!
+//! - load a scene: [`scene::load_scene`] (OBJ, glTF, TOML, .vs3, built-in names), or
+//!   [`scene::Scene::from_desc`] on a [`scene::SceneDesc`] built in code
+//!   ([`scene::arrays::scene_from_arrays`] from vertex/face arrays);
+//! - choose methods: [`form_factor::Method`] and [`form_factor::Options`], [`solve::Solver`],
+//!   [`transport::Kind`], gathered in [`pipeline::Settings`];
+//! - solve: [`pipeline::solve_scene`] (per-element radiosity, per-object means, the report),
+//!   [`pipeline::solve_all`] (every solver on one mesh and F); render with [`render`];
+//! - matrices: [`view_factors::compute`] / [`view_factors::Job`] (per object or element,
+//!   with diagnostics), single factors [`form_factor::analytic::form_factor`] and
+//!   [`form_factor::analytic::point_factor`];
+//! - heat: [`thermal::solve`] (per surface T, q, Q, J, G; grey or in wavelength bands),
+//!   [`thermal::exchange_factors`] (Gebhart factors, conductances).
+//!
+//! Internals stay inside the crate: the BVH's nodes and traversal (only [`accel::Bvh`],
+//! [`accel::SceneRays`] and their rays are public), the contour-integral kernel, and the
+//! random sampling streams.
 #![warn(missing_docs)]
 // `unsafe` only in `accel::bvh::avx2` (SIMD intrinsics behind run-time detection; see there).
 #![deny(unsafe_code)]
@@ -34,7 +53,7 @@ pub mod progress;
 pub mod reconstruct;
 pub mod render;
 pub mod report;
-pub mod sampling;
+pub(crate) mod sampling;
 pub mod scene;
 pub mod sky;
 pub mod solve;

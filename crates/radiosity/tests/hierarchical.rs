@@ -584,13 +584,12 @@ fn hierarchy_row_sums() {
         }
         let e = &hier.mesh.elements[i];
         let pts = hier.receivers.points(i, 3);
-        let (t, b) = radiosity::sampling::basis(e.normal);
         let (mut hit, mut total) = (0, 0);
         for (k, p) in pts.iter().enumerate() {
             for s in 0..16u32 {
-                let (u1, u2) = radiosity::sampling::halton2(s + 16 * k as u32, (0.3, 0.7));
-                let d = radiosity::sampling::cosine_hemisphere(u1, u2);
-                let dir = t * d.x + b * d.y + e.normal * d.z;
+                let i = s + 16 * k as u32;
+                let (u1, u2) = ((radical_inverse(2, i) + 0.3).fract(), (radical_inverse(3, i) + 0.7).fract());
+                let dir = cosine_about(e.normal, u1, u2);
                 total += 1;
                 let o = *p + e.normal * std::env::var("OFF").ok().and_then(|x| x.parse::<f64>().ok()).unwrap_or(1e-6) * diag;
                 match hier.rays.closest_facing(o.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch)) {
@@ -1036,13 +1035,11 @@ fn link_truth() {
             k = *nd.child.iter().find(|&&c| tree.contains(c, leaf)).unwrap();
         }
         let scale = h.link_scale()[i] as f64;
-        let (t, bb) = radiosity::sampling::basis(e.normal);
         let (mut mc, mut miss, mut emitted) = (0.0, 0.0, 0.0);
         let mut miss_where: std::collections::HashMap<usize, f64> = Default::default();
         for _ in 0..rays_n {
             let p = e.point(&sol.mesh.positions, rnd(), rnd()) + e.normal * 1e-4;
-            let d = radiosity::sampling::cosine_hemisphere(rnd(), rnd());
-            let dir = (t * d.x + bb * d.y + e.normal * d.z).as_vec3();
+            let dir = cosine_about(e.normal, rnd(), rnd()).as_vec3();
             let Some((hit, poly)) = sol.rays.closest_facing(p.as_vec3(), dir, f32::INFINITY, Some(e.patch)) else {
                 continue;
             };
@@ -1234,9 +1231,7 @@ fn light_on_covered_parts() {
                 continue;
             };
             let p = e.point(&mesh.positions, u + rnd() / 8.0, v + rnd() / 8.0) + e.normal * 1e-3;
-            let (t, b) = radiosity::sampling::basis(e.normal);
-            let d = radiosity::sampling::cosine_hemisphere(rnd(), rnd());
-            let dir = (t * d.x + b * d.y + e.normal * d.z).as_vec3();
+            let dir = cosine_about(e.normal, rnd(), rnd()).as_vec3();
             let Some((hit, poly)) = sol.rays.closest_facing(p.as_vec3(), dir, f32::INFINITY, Some(e.patch)) else {
                 continue;
             };
@@ -1261,4 +1256,22 @@ fn light_on_covered_parts() {
             &v[..v.len().min(12)]
         );
     }
+}
+
+/// A cosine-weighted direction about the unit normal `n` for (u1, u2) in [0, 1)² (Malley).
+fn cosine_about(n: glam::DVec3, u1: f64, u2: f64) -> glam::DVec3 {
+    let (t, b) = n.any_orthonormal_pair();
+    let (r, phi) = (u1.sqrt(), 2.0 * std::f64::consts::PI * u2);
+    t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt()
+}
+
+/// The radical inverse of `i` in `base` (a Halton coordinate).
+fn radical_inverse(base: u32, mut i: u32) -> f64 {
+    let (inv, mut f, mut r) = (1.0 / base as f64, 1.0 / base as f64, 0.0);
+    while i > 0 {
+        r += f * (i % base) as f64;
+        i /= base;
+        f *= inv;
+    }
+    r
 }

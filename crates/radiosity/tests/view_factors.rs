@@ -283,7 +283,7 @@ fn obstruction_only_surfaces_block_but_have_no_row() {
         for &(y, wy) in gl {
             let x0 = 1.0 - x;
             let top = [DVec3::new(x0, 0.0, 1.0), DVec3::new(x0, 1.0, 1.0), DVec3::new(1.0, 1.0, 1.0), DVec3::new(1.0, 0.0, 1.0)];
-            exact += wx * wy * radiosity::geom::kernel::point_to_polygon(DVec3::new(x, y, 0.0), DVec3::Z, &top, -DVec3::Z);
+            exact += wx * wy * radiosity::form_factor::analytic::point_factor(DVec3::new(x, y, 0.0), DVec3::Z, &top, -DVec3::Z);
         }
     }
     let got = o.matrix.get(0, 1);

@@ -13,8 +13,9 @@
 //! the two polygons the points lie on (a planar polygon cannot block a ray that leaves it),
 //! and starts/ends a relative epsilon away from them. See [`SceneRays`].
 
-pub mod bvh;
+mod bvh;
 mod scene_rays;
+pub mod workload;
 
 pub use bvh::{Bvh, BvhStats, Hit, Ray};
 pub use scene_rays::{SceneRays, SEGMENT_EPS};

@@ -10,7 +10,7 @@
 //!   is clipped to the pyramid with apex `x` over the receiver (and to the receiver's front
 //!   half-space), projected from `x` onto the receiver's plane, and cut out of the
 //!   receiver (2-D convex differences). `F(dA_x → V_j(x))` is then the contour integral
-//!   ([`super::kernel`]) over the visible convex pieces: exact for any number of partial
+//!   ([`super::analytic::point_factor`]) over the visible convex pieces: exact for any number of partial
 //!   occluders, with no visibility sampling.
 //! - **Sender, adaptively.** The sender is split into triangles; each triangle carries a
 //!   3×3 and a 4×4 collapsed Gauss–Legendre estimate, their difference is its error. The

@@ -43,6 +43,15 @@ pub fn area_factor(pi: &[DVec3], ni: DVec3, pj: &[DVec3], nj: DVec3) -> f64 {
     area_factor_with(&mut s, pi, ni, pj, nj)
 }
 
+/// Form factor from the differential area at `x` (unit normal `n`) to the convex planar
+/// polygon `poly`, front side only (right-hand rule about `poly_normal`; zero when `x` is
+/// behind it), no occlusion: Lambert's contour integral
+/// `F = 1/(2π) Σ_edges γ_k (n · (r_k × r_{k+1}) / |r_k × r_{k+1}|)` with `γ_k` the angle each
+/// edge subtends at `x` (Baum, Rushmeier & Winget 1989; the point-sampled method's kernel).
+pub fn point_factor(x: DVec3, n: DVec3, poly: &[DVec3], poly_normal: DVec3) -> f64 {
+    crate::geom::kernel::point_to_polygon(x, n, poly, poly_normal)
+}
+
 /// `F_ij = area_factor / A_i` (see [`area_factor`]).
 pub fn form_factor(pi: &[DVec3], ni: DVec3, pj: &[DVec3], nj: DVec3) -> f64 {
     let a = super::geom::area_3d(pi);

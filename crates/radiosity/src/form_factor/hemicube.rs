@@ -12,7 +12,7 @@
 //! pixels' delta form factors. The classic delta factors are the midpoint values
 //! `ΔA / (π (x² + y² + 1)²)` (top) and `z ΔA / (π (y² + z² + 1)²)` (sides); we precompute
 //! each pixel's *exact* factor instead (the point-to-polygon contour integral of the pixel
-//! square, [`super::kernel`]), so the table sums to 1 to rounding and the only error left
+//! square, [`super::analytic::point_factor`]), so the table sums to 1 to rounding and the only error left
 //! is the method's own:
 //!
 //! - **aliasing**: a pixel is all or nothing, so a receiver's factor is quantised to

@@ -11,7 +11,7 @@
 //!   behind a surface node `S`; a node holding the other is opened;
 //! - the factor `F_RS` is estimated from a few points of `R` (its receiver points or, above
 //!   the leaves, the centroids of a [`Tree::frontier`]) against a frontier of up to eight
-//!   nodes of `S`: exact contour integrals ([`crate::geom::kernel`]) for nearby elements,
+//!   nodes of `S`: exact contour integrals ([`super::analytic::point_factor`]) for nearby elements,
 //!   `cosθ_R · P_S(−d) / (π r² + P_S(−d))` otherwise (a disk of the node's projected area,
 //!   bounded near it), with `P_S` the orientation-aware projected area of a cluster
 //!   ([`crate::transport::hierarchical::Tree::projected_area`]);

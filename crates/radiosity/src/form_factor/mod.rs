@@ -15,7 +15,7 @@
 //! - [`Method::Analytic`] — exact polygon-to-polygon factor by the double contour integral,
 //!   no occlusion (Schröder & Hanrahan 1993).
 //! - [`Method::PointSampled`] — the differential-area-to-polygon factor by the contour
-//!   integral ([`kernel`]) at stratified points of the receiver, times the visible fraction
+//!   integral ([`analytic::point_factor`]) at stratified points of the receiver, times the visible fraction
 //!   from ray-sampled points of the source (Wallace, Elmquist & Haines 1989).
 //! - [`Method::MonteCarlo`] — cosine-weighted rays from stratified points of the sender,
 //!   closest hit (e.g. Cohen & Wallace 1993 §4.10).

@@ -1,7 +1,8 @@
 //! Geometry shared by the pipeline's stages (scene, mesh, form factors, rendering): Newell
 //! normals, Gauss–Legendre nodes, clipping of convex polygons by planes, 2-D convex set
 //! differences (for shadows), small polygon helpers, and the point-to-polygon form-factor
-//! kernel ([`kernel`]). It depends on nothing else in the crate, so every stage may use it.
+//! kernel (`kernel`, crate-private; public as [`crate::form_factor::analytic::point_factor`]).
+//! It depends on nothing else in the crate, so every stage may use it.
 //!
 //! Everything is f64; polygons are vertex lists in order (convex unless stated).
 
@@ -9,7 +10,7 @@ use std::sync::OnceLock;
 
 use glam::{DVec2, DVec3};
 
-pub mod kernel;
+pub(crate) mod kernel;
 
 /// Largest Gauss–Legendre order kept in the table.
 pub const MAX_GAUSS: usize = 32;

@@ -10,7 +10,7 @@
 //! H_indirect(x) = ∫_Ω (B − E)(y(x, ω)) cos θ dω / π  = Σ_j F(dA_x → j) (B_j − E_j)
 //! ```
 //!
-//! `F(dA_x → Q)` is the exact contour integral ([`crate::geom::kernel`]) and `V̂` the
+//! `F(dA_x → Q)` is the exact contour integral ([`crate::form_factor::analytic::point_factor`]) and `V̂` the
 //! fraction of stratified shadow rays to the emitter polygon that reach it, so direct light
 //! and its soft shadows are resolved per pixel, whatever the mesh. The indirect irradiance
 //! (light that has bounced at least once) is read in one of two ways ([`Indirect`]):
