@@ -963,7 +963,8 @@ impl Rows<'_> {
             s.lift.extend(s.pieces.piece(k).iter().map(|q| fr.to_3d(*q)));
             f += point_to_polygon_unsided(x, nx, &s.lift);
         }
-        f
+        // Never negative but for round-off (a piece within `eps` of the sender's plane).
+        f.max(0.0)
     }
 }
 
@@ -1048,7 +1049,9 @@ impl RegionCtx<'_, '_> {
         }
         self.order(&tri, &mut occ);
         if occ.is_empty() {
-            let est = self.recv.pieces.iter().map(|p| analytic::area_factor_with(self.an, &tri, self.ni, p, self.recv.normal)).sum();
+            // The integrand is never negative: a negative exact integral is round-off of the
+            // contour terms (a sliver region nearly in the receiver's plane).
+            let est = self.recv.pieces.iter().map(|p| analytic::area_factor_with(self.an, &tri, self.ni, p, self.recv.normal).max(0.0)).sum();
             return Region { tri, est, err: 0.0, occ };
         }
         *evals += EVALS_PER_REGION;
