@@ -201,6 +201,8 @@ impl Receivers {
                 // the fine grid's 64 points would cost most of the probes on a large model
                 // for a share of the scene's area that the 3 × 3 grid resolves well enough.
                 let fine_grid = e.area.sqrt() >= FINE_SIZE * diag;
+                // Whether the fine grid decided the open cells (it found some open).
+                let mut fine_decided = false;
                 let mut fine_open = Vec::new();
                 if open3 > 0 && (open3 < n3 || corner_covered) && fine_grid {
                     let fine = grid(e, &mesh.positions, FINE_K);
@@ -214,6 +216,7 @@ impl Receivers {
                     if !fine_open.is_empty() {
                         lv[MAX_K - 1] = std::mem::take(&mut fine_open);
                         cells = mask;
+                        fine_decided = true;
                         if mask == u64::MAX {
                             frac = 1.0;
                         }
@@ -223,8 +226,11 @@ impl Receivers {
                         cells = 0;
                     }
                 }
-                if open3 > 0 && open3 < n3 && cells != u64::MAX && (cells == 0 || !fine_grid) {
-                    // The fine cells whose centres lie in an open 3 × 3 cell.
+                if open3 > 0 && open3 < n3 && !fine_decided {
+                    // The fine cells whose centres lie in an open 3 × 3 cell. (Small
+                    // elements too: left at "all cells open" with an open fraction of
+                    // open3/9, the adaptive factors integrated the whole element and divided
+                    // by its open area, raw rows up to 9.0 in office2's luminaires, issue 9.)
                     cells = 0;
                     for b in 0..FINE_K * FINE_K {
                         let (u, v) =
