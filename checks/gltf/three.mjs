@@ -3,10 +3,11 @@
 // view (a PNG at the same exposure) in linear light. three.js draws SS × SS times larger
 // without antialiasing and the pixels are averaged in linear light (a box filter, as our
 // renderer's samples per pixel).
-//   node three.mjs SCENE.glb OURS.png OUT.png [MAX_RMSE] [colors|lightmap|uniform:L]
+//   node three.mjs SCENE.glb OURS.png OUT.png [MAX_RMSE] [colors|lightmap|moz|moz-textured|uniform:L]
 // Prints the relative RMSE; exits 1 above MAX_RMSE (default 0.08), when three.js did not
-// use the vertex colours (or the lightmap on TEXCOORD_1), or on any error. `colors` and
-// `lightmap` also fail when more than 0.1 % of the pixels are darker than half of ours
+// use the vertex colours (or the lightmap on TEXCOORD_1: as emissive texture, or as
+// MOZ_lightmap for `moz`; `moz-textured` also needs a base-colour texture), or on any
+// error. `colors`, `lightmap` and `moz` also fail when more than 0.1 % of the pixels are darker than half of ours
 // (black texels showing through); `uniform:L` (a furnace, where every surface has one
 // radiance) fails when any pixel is more than 2 % off L: a seam, an unfilled texel or
 // a texel bled from another chart shows at once.
@@ -108,10 +109,13 @@ try {
     if (!masked(p) && oursL(p) > 0.1 * meanL && theirsL(p) < 0.5 * oursL(p)) dark++;
   }
   console.log(`three.js r${info.three}: ${info.unlit} unlit meshes, ${info.vertexColors} with vertex colours, ` +
-    `${info.lightmaps} with the lightmap on TEXCOORD_1; ` +
+    `${info.lightmaps} with the lightmap on TEXCOORD_1 as emissive texture, ${info.moz} as MOZ_lightmap, ${info.textured} textured; ` +
     `relative RMSE against ${path.basename(ours)} ${(100 * rmse).toFixed(2)} % light masked (limit ${(100 * max).toFixed(1)} %), ` +
     `${(100 * all).toFixed(2)} % unmasked; ${dark} pixels darker than half of ours -> ${out}`);
-  const used = mode === 'colors' ? info.unlit > 0 && info.vertexColors > 0 : info.lightmaps > 0;
+  const used = mode === 'colors' ? info.unlit > 0 && info.vertexColors > 0
+    : mode === 'moz' ? info.moz > 0 && info.vertexColors === 0
+    : mode === 'moz-textured' ? info.moz > 0 && info.textured > 0 && info.vertexColors === 0
+    : info.lightmaps > 0;
   if (!(rmse <= max) || !used || dark > 0.001 * W * H) status = 1;
   if (mode.startsWith('uniform:')) {
     const want = +mode.slice(8);

@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::{bail, Result};
 use clap::Args;
 use radiosity::mesh::atlas::Atlas;
-use radiosity::output::gltf::{auto_exposure, baked_glb, vertex_colors_glb, Options};
+use radiosity::output::gltf::{auto_exposure, baked_glb, moz_lightmap_png, vertex_colors_glb, Lightmap, LightmapMode, Options};
 use radiosity::pipeline::solve_scene;
 use radiosity::render::{gather, lightmap};
 
@@ -35,6 +35,13 @@ pub struct BakeArgs {
     /// FILE.lightmap.exr.
     #[arg(long)]
     pub lightmap: bool,
+    /// How the lightmap is shown: `emissive` (radiance as every material's emissive
+    /// texture over a black base colour: core glTF, the same in every viewer) or `moz`
+    /// (irradiance in MOZ_lightmap, multiplied by the materials' own colours and textures,
+    /// which are kept: three.js lightMap, Mozilla Hubs; other viewers light the plain
+    /// materials themselves).
+    #[arg(long, value_name = "MODE", default_value = "emissive")]
+    pub lightmap_mode: String,
     /// Lightmap side in texels (8 to 16384).
     #[arg(long, value_name = "N", default_value_t = radiosity::mesh::atlas::DEFAULT_SIZE)]
     pub lightmap_size: usize,
@@ -60,8 +67,10 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     if a.shadow_rays == 0 || a.shadow_rays > 16 {
         bail!("--shadow-rays must be between 1 and 16");
     }
-    if !a.lightmap && (a.texel_size.is_some() || a.lightmap_size != radiosity::mesh::atlas::DEFAULT_SIZE) {
-        bail!("--lightmap-size and --texel-size need --lightmap");
+    let mode: LightmapMode = a.lightmap_mode.parse().map_err(|e| anyhow::anyhow!("--lightmap-mode: {e}"))?;
+    if !a.lightmap && (a.texel_size.is_some() || a.lightmap_size != radiosity::mesh::atlas::DEFAULT_SIZE || mode != LightmapMode::Emissive)
+    {
+        bail!("--lightmap-size, --texel-size and --lightmap-mode need --lightmap");
     }
     let exr_path = a.lightmap.then(|| a.output.with_extension("lightmap.exr"));
     let settings = a.solve.settings()?;
@@ -107,19 +116,48 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
             gather_axis: axis,
             seed: a.solve.seed,
         };
-        let element_l: Vec<_> = b.iter().map(|x| *x / std::f64::consts::PI).collect();
-        let (img, st) = lightmap::render(&solved.scene, &solved.mesh, &solved.rays, &indirect, atlas, &element_l, &gopts, &progress);
+        let (quantity, element_l): (_, Vec<_>) = match mode {
+            LightmapMode::Emissive => (lightmap::Quantity::Radiance, b.iter().map(|x| *x / std::f64::consts::PI).collect()),
+            LightmapMode::Moz => {
+                // Irradiance H = (B − E)/ρ per channel (0 where ρ is).
+                let (rho, e) = radiosity::pipeline::element_materials(&solved.scene, &solved.mesh);
+                let h = b
+                    .iter()
+                    .zip(rho.iter().zip(&e))
+                    .map(|(b, (r, e))| {
+                        let (b, r, e) = (b.to_array(), r.to_array(), e.to_array());
+                        radiosity::Rgb::from_array(std::array::from_fn(|c| if r[c] > 0.0 { ((b[c] - e[c]) / r[c]).max(0.0) } else { 0.0 }))
+                    })
+                    .collect();
+                (lightmap::Quantity::Irradiance, h)
+            }
+        };
+        let (img, st) =
+            lightmap::render(&solved.scene, &solved.mesh, &solved.rays, &indirect, atlas, &element_l, quantity, &gopts, &progress);
         if radiosity::Progress::should_stop(&progress) {
             return Err(radiosity::Error::Cancelled.into());
         }
-        let png = radiosity::output::png::encode(&img, Some(exposure))?;
+        let (png, intensity) = match mode {
+            LightmapMode::Emissive => (radiosity::output::png::encode(&img, Some(exposure))?, 1.0),
+            LightmapMode::Moz => {
+                let (png, intensity, clipped) = moz_lightmap_png(&img, exposure)?;
+                if clipped > 0 && !a.solve.quiet {
+                    eprintln!("lightmap: {clipped} texels above MOZ_lightmap intensity {intensity:.4e} clipped (the brightest 0.1 %; the EXR keeps them)");
+                }
+                (png, intensity)
+            }
+        };
         if let Some(p) = &exr_path {
             write_atomic(p, &radiosity::output::exr::encode(&img)?)?;
         }
         lightmap_line = Some(format!(
-            "lightmap {n}² ({}): {} charts, texel {:.4e} scene units, {:.1} % of the texture in charts, {:.1} % covered by surfaces; \
+            "lightmap {n}² ({}, {}): {} charts, texel {:.4e} scene units, {:.1} % of the texture in charts, {:.1} % covered by surfaces; \
              {} texels gathered, {} dilated, {} flat; {:.2} s",
             exr_path.as_ref().map_or(String::new(), |p| p.display().to_string()),
+            match mode {
+                LightmapMode::Emissive => "radiance, emissive texture".to_string(),
+                LightmapMode::Moz => format!("irradiance, MOZ_lightmap intensity {intensity:.4e}"),
+            },
             atlas.charts.len(),
             atlas.texel,
             100.0 * atlas.used(),
@@ -139,7 +177,8 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
                 atlas.charts.len()
             ));
         }
-        baked_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, Some((atlas, &png)), &opts)?
+        let lm = Lightmap { atlas, png: &png, mode, intensity };
+        baked_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, Some(lm), &opts)?
     } else {
         vertex_colors_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, &opts)?
     };

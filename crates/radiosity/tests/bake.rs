@@ -221,7 +221,7 @@ fn furnace_lightmap_texels_are_all_the_closed_form() {
     let indirect = solved.indirect(false);
     let opts = gather::Options { width: 64, height: 64, spp_axis: 1, shadow_axis: 2, gather_axis: 0, seed: 1 };
     let l: Vec<_> = solved.solution.display_radiosity().iter().map(|b| *b / PI).collect();
-    let (img, st) = lightmap::render(&solved.scene, &solved.mesh, &solved.rays, &indirect, &atlas, &l, &opts, &NoProgress);
+    let (img, st) = lightmap::render(&solved.scene, &solved.mesh, &solved.rays, &indirect, &atlas, &l, lightmap::Quantity::Radiance, &opts, &NoProgress);
     assert!(st.shaded > 1000 && st.dilated > 0, "{st:?}");
     let mut n = 0;
     for c in &atlas.charts {

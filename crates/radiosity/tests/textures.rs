@@ -385,6 +385,31 @@ fn obj_map_kd_reads_vt_upwards_and_map_ke_emits() {
     let glow = scene.polygons.iter().position(|p| scene.materials[p.material as usize].name == "glow").unwrap();
     let e = scene.emission_at(glow, DVec3::new(0.5, 0.2, 1.0), 0.0);
     assert!((e - Rgb::splat(2.0 * g)).abs().max_element() < 1e-6, "{e}");
+    // Through a TOML scene file (two meshes: textures renumbered), the same lookups.
+    // The second mesh: the same, 10 units along x.
+    let text = std::fs::read_to_string(dir.join("t.obj")).unwrap();
+    let moved = text.lines().map(|l| match l.strip_prefix("v ") {
+        Some(r) => {
+            let c: Vec<f64> = r.split_whitespace().map(|x| x.parse().unwrap()).collect();
+            format!("v {} {} {}\n", c[0] + 10.0, c[1], c[2])
+        }
+        None => format!("{l}\n"),
+    });
+    std::fs::write(dir.join("t2.obj"), moved.collect::<String>()).unwrap();
+    std::fs::write(dir.join("t.toml"), "meshes = [\"t.obj\", \"t2.obj\"]\n").unwrap();
+    let via = scene::load_scene(dir.join("t.toml").to_str().unwrap()).unwrap();
+    let n = scene.polygons.len();
+    assert_eq!((via.textures.len(), via.polygons.len()), (2 * scene.textures.len(), 2 * n));
+    for k in 0..2 * n {
+        let shift = if k < n { 0.0 } else { 10.0 };
+        for p in [DVec3::new(0.5, 0.75, 0.0), DVec3::new(0.5, 0.25, 0.0), DVec3::new(0.5, 0.2, 1.0)] {
+            let q = p + DVec3::new(shift, 0.0, 0.0);
+            let (a, b) = (via.reflectance_at(k, q, 0.0), scene.reflectance_at(k % n, p, 0.0));
+            assert!((a - b).abs().max_element() < 1e-12, "polygon {k}: ρ {a} via TOML, {b} direct");
+            let (a, b) = (via.emission_at(k, q, 0.0), scene.emission_at(k % n, p, 0.0));
+            assert!((a - b).abs().max_element() < 1e-12, "polygon {k}: Le {a} via TOML, {b} direct");
+        }
+    }
 }
 
 #[test]
@@ -407,4 +432,110 @@ fn bad_textures_are_clear_errors() {
     assert!(d.polygons[0].uvs.is_empty());
     let w = d.warnings.iter().find(|w| w.msg.contains("texture index")).expect("a warning");
     assert!(w.loc.as_ref().is_some_and(|l| l.to_string().contains("d.obj:5")), "{w:?}");
+}
+
+/// Issue 11, `bake --lightmap --lightmap-mode moz`: the lightmap holds the irradiance E
+/// (every floor texel: the radiance lightmap's L = Le + ρ(x)·E/π to 1e-9, ρ the checker
+/// under it), the GLB keeps the checker as the floor's baseColorTexture (its sRGB bytes
+/// back exactly) on TEXCOORD_0 = the file's UVs, holds no vertex colours, and its
+/// MOZ_lightmap texels times the intensity give k·E to the 8-bit step.
+#[test]
+fn moz_lightmap_keeps_the_texture_and_holds_the_irradiance() {
+    use radiosity::mesh::atlas::{Atlas, Options as AtlasOptions};
+    use radiosity::output::gltf::{baked_glb, moz_lightmap_png, Lightmap, LightmapMode, Options};
+    use radiosity::render::lightmap::{self, Quantity};
+    let s = Settings { mesh_size: Some(0.25), ..Default::default() };
+    let solved = solve_scene(room(true), &s, &NoProgress).unwrap();
+    let n = 128;
+    let atlas = Atlas::build(&solved.scene, &AtlasOptions { size: n, ..Default::default() }).unwrap();
+    let indirect = solved.indirect(false);
+    let opts = gather::Options { width: n, height: n, spp_axis: 1, shadow_axis: 2, gather_axis: 0, seed: 1 };
+    let b = solved.solution.display_radiosity();
+    let l: Vec<_> = b.iter().map(|b| *b / PI).collect();
+    let sc = &solved.scene;
+    let (rad, _) = lightmap::render(sc, &solved.mesh, &solved.rays, &indirect, &atlas, &l, Quantity::Radiance, &opts, &NoProgress);
+    let (irr, st) = lightmap::render(sc, &solved.mesh, &solved.rays, &indirect, &atlas, &l, Quantity::Irradiance, &opts, &NoProgress);
+    assert!(st.shaded > 1000, "{st:?}");
+    // Every texel centre well inside the floor: L = ρ(x)·E/π.
+    let floor = sc.polygons.iter().position(|p| sc.objects[p.object as usize].name == "floor").unwrap();
+    let ch = &atlas.charts[atlas.chart_of[floor] as usize];
+    let mut checked = 0;
+    for y in ch.y..ch.y + ch.height {
+        for x in ch.x..ch.x + ch.width {
+            let p = atlas.world(floor as u32, x as f64 + 0.5, y as f64 + 0.5);
+            if !(p.x > 0.02 && p.x < 1.98 && p.z > 0.02 && p.z < 1.98 && p.y.abs() < 1e-9) {
+                continue;
+            }
+            let rho = sc.reflectance_at(floor, p, atlas.texel * atlas.texel);
+            let (lt, et) = (rad.pixels[y * n + x], irr.pixels[y * n + x]);
+            let want = rho * et / PI;
+            assert!((lt - want).abs().max_element() <= 1e-9 * lt.max_element().max(1e-12), "texel ({x}, {y}): L {lt}, ρE/π {want}");
+            checked += 1;
+        }
+    }
+    assert!(checked > 500, "{checked} floor texels");
+
+    let k = 0.7;
+    let (png, intensity, clipped) = moz_lightmap_png(&irr, k).unwrap();
+    assert!(clipped <= n * n / 1000 + 1, "{clipped} clipped");
+    let vb = &solved.vertex_radiosity;
+    let gopts = Options { exposure: k, camera: None, generator: "test".into() };
+    let lm = Lightmap { atlas: &atlas, png: &png, mode: LightmapMode::Moz, intensity };
+    let (glb, _) = baked_glb(sc, &solved.mesh, vb, Some(lm), &gopts).unwrap();
+    let g = gltf::Gltf::from_slice(&glb).unwrap();
+    let blob = g.blob.as_deref().unwrap();
+    assert!(g.extensions_used().any(|e| e == "MOZ_lightmap"));
+    let image_bytes = |img: gltf::Image| match img.source() {
+        gltf::image::Source::View { view, .. } => &blob[view.offset()..view.offset() + view.length()],
+        _ => panic!("image not in the buffer"),
+    };
+    let decode = |bytes: &[u8]| image::load_from_memory_with_format(bytes, image::ImageFormat::Png).unwrap().to_rgb8();
+    let mat = g.materials().find(|m| m.name() == Some("checker")).unwrap();
+    let doc: Value = serde_json::from_slice(&gltf::binary::Glb::from_slice(&glb).unwrap().json).unwrap();
+    let ext = &doc["materials"][mat.index().unwrap()]["extensions"]["MOZ_lightmap"];
+    assert!(ext.is_object(), "no MOZ_lightmap on the material");
+    assert_eq!(ext["texCoord"], 1);
+    assert!((ext["intensity"].as_f64().unwrap() - intensity).abs() <= 1e-12 * intensity);
+    // The checker comes back byte for byte.
+    let base = mat.pbr_metallic_roughness().base_color_texture().expect("baseColorTexture kept");
+    assert_eq!(base.tex_coord(), 0);
+    let tex = decode(image_bytes(base.texture().source()));
+    assert_eq!(tex.dimensions(), (64, 64));
+    for (x, y, p) in tex.enumerate_pixels() {
+        assert_eq!(p.0, checker(x as usize, y as usize), "checker texel ({x}, {y})");
+    }
+    // The lightmap's texels × intensity = k·E (8-bit linear: half a step).
+    let lmi = g.textures().nth(ext["index"].as_u64().unwrap() as usize).unwrap();
+    let lmap = decode(image_bytes(lmi.source()));
+    let step = intensity / 255.0;
+    let mut worst: f64 = 0.0;
+    for (x, y, p) in lmap.enumerate_pixels() {
+        let e = irr.pixels[y as usize * n + x as usize] * k;
+        if e.max_element() > intensity {
+            continue;
+        }
+        for c in 0..3 {
+            worst = worst.max((p.0[c] as f64 / 255.0 * intensity - e[c]).abs());
+        }
+    }
+    assert!(worst <= 0.5 * step + 1e-9, "lightmap off by {worst:.3e}, step {step:.3e}");
+    // The floor's TEXCOORD_0 = the file's UVs (u, v) = (x, z); no vertex colours anywhere.
+    for mesh in g.meshes() {
+        for prim in mesh.primitives() {
+            assert!(prim.get(&gltf::Semantic::Colors(0)).is_none(), "COLOR_0 under MOZ_lightmap");
+            if prim.material().name() != Some("checker") {
+                continue;
+            }
+            let read = |a: gltf::Accessor| -> Vec<f32> {
+                let v = a.view().unwrap();
+                let o = v.offset() + a.offset();
+                blob[o..o + a.count() * a.size()].chunks(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect()
+            };
+            let pos = read(prim.get(&gltf::Semantic::Positions).unwrap());
+            let uv = read(prim.get(&gltf::Semantic::TexCoords(0)).unwrap());
+            for (p, t) in pos.chunks(3).zip(uv.chunks(2)) {
+                assert!((t[0] - p[0]).abs() < 1e-5 && (t[1] - p[2]).abs() < 1e-5, "vertex {p:?}: uv {t:?}");
+            }
+        }
+    }
 }

@@ -26,8 +26,27 @@
 //! the lightmap — radiance × exposure, 8-bit sRGB PNG in the buffer — as its
 //! `emissiveTexture` on texture coordinate 1, with a black base colour and no
 //! `KHR_materials_unlit`: core glTF that every viewer draws as is (emission is not lit).
-//! The vertex colours stay. `MOZ_lightmap` is not written (its texture multiplies the base
-//! colour, so it would need the irradiance).
+//! The vertex colours stay.
+//!
+//! The other lightmap mode, [`LightmapMode::Moz`], follows Mozilla Hubs' `MOZ_lightmap`
+//! (three.js's `lightMap`; the convention Hubs, Spoke and three.js's exporter write): the
+//! lightmap holds the *irradiance* `E` arriving at each texel, and the viewer multiplies it
+//! by the material's own base colour, so texture detail stays at the texture's resolution:
+//!
+//! ```text
+//! shown = baseColour(uv₀) · texel(uv₁) · intensity / π,   texel · intensity = k · E
+//! ```
+//!
+//! Materials keep their reflectance as `baseColorFactor` and their `baseColorTexture`
+//! (re-encoded as sRGB PNG, its coordinate set and transform applied to `TEXCOORD_0`, its
+//! wrap modes in the sampler), emitters their radiance × `k` (clipped) as
+//! `emissiveFactor`; there are no vertex colours and no `KHR_materials_unlit`. The lightmap
+//! is an 8-bit *linear* PNG (three.js and Hubs read it as data, with no transfer function)
+//! scaled into [0, 1] by `intensity` (the 99.9th percentile of `k·E`; brighter texels are
+//! clipped). `MOZ_lightmap` is used, not required: a viewer that does not know it shows
+//! the plain materials lit by its own lights. three.js's standard material takes a few
+//! per cent of the diffuse light for its specular layer; `MeshLambertMaterial` shows the
+//! formula above exactly (the check page and the viewer switch to it).
 //!
 //! Geometry: one node per scene object (its name), one mesh with one triangle primitive
 //! per material; quadrilateral elements are split into two triangles; vertices are the
@@ -89,6 +108,80 @@ pub fn auto_exposure(scene: &Scene, mesh: &Mesh, element_b: &[Rgb]) -> f64 {
         }
     }
     0.8 / v.last().unwrap().0
+}
+
+/// How a lightmap is wired into the materials (see the module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LightmapMode {
+    /// Radiance × exposure as every material's `emissiveTexture` over a black base colour:
+    /// core glTF, shown the same by every viewer; texture detail only at the lightmap's
+    /// resolution.
+    #[default]
+    Emissive,
+    /// Irradiance in `MOZ_lightmap`, multiplied by the material's own base colour and
+    /// texture (kept); viewers without the extension light the materials themselves.
+    Moz,
+}
+
+impl LightmapMode {
+    /// Every mode.
+    pub const ALL: [LightmapMode; 2] = [LightmapMode::Emissive, LightmapMode::Moz];
+
+    /// Command-line name.
+    pub fn name(self) -> &'static str {
+        match self {
+            LightmapMode::Emissive => "emissive",
+            LightmapMode::Moz => "moz",
+        }
+    }
+}
+
+impl std::str::FromStr for LightmapMode {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        LightmapMode::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            Error::Invalid(format!("unknown lightmap mode '{s}' (use emissive or moz)"))
+        })
+    }
+}
+
+/// A lightmap to wire into the baked scene.
+#[derive(Clone, Copy, Debug)]
+pub struct Lightmap<'a> {
+    /// The atlas (`TEXCOORD_1`).
+    pub atlas: &'a crate::mesh::atlas::Atlas,
+    /// The lightmap image as PNG: radiance × exposure in sRGB ([`LightmapMode::Emissive`]),
+    /// or irradiance × exposure / `intensity`, linear ([`LightmapMode::Moz`]).
+    pub png: &'a [u8],
+    /// The mode.
+    pub mode: LightmapMode,
+    /// `MOZ_lightmap.intensity` (the scale the PNG's texels are multiplied by).
+    pub intensity: f64,
+}
+
+/// The `MOZ_lightmap` image of an irradiance lightmap `img` at `exposure`: an 8-bit linear
+/// PNG of `k·E / intensity`, with `intensity` the 99.9th percentile of the texels' largest
+/// channel of `k·E` (texels above it are clipped: their count is returned too).
+pub fn moz_lightmap_png(img: &crate::render::Image, exposure: f64) -> Result<(Vec<u8>, f64, usize)> {
+    let mut peaks: Vec<f64> = img.pixels.iter().map(|p| p.max_element() * exposure).filter(|x| *x > 0.0 && x.is_finite()).collect();
+    let intensity = if peaks.is_empty() {
+        1.0
+    } else {
+        let k = ((peaks.len() as f64 * 0.999) as usize).min(peaks.len() - 1);
+        *peaks.select_nth_unstable_by(k, f64::total_cmp).1
+    };
+    let scale = exposure / intensity;
+    let mut clipped = 0;
+    let rgb: Vec<u8> = img
+        .pixels
+        .iter()
+        .flat_map(|p| {
+            let c = (*p * scale).to_array();
+            clipped += c.iter().any(|x| *x > 1.0) as usize;
+            c.map(|x| (255.0 * x.clamp(0.0, 1.0)).round() as u8)
+        })
+        .collect();
+    Ok((super::png::encode_rgb8_as(img.width, img.height, &rgb, false)?, intensity, clipped))
 }
 
 /// Summary of what was written.
@@ -232,17 +325,11 @@ pub fn vertex_colors_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], opts: &Op
     baked_glb(scene, mesh, vertex_b, None, opts)
 }
 
-/// [`vertex_colors_glb`], and with `lightmap` = (atlas, PNG of radiance × exposure in
-/// sRGB) also `TEXCOORD_1` from the atlas and the lightmap as every material's
-/// `emissiveTexture` on it, over a black base colour: the core-glTF way to show baked
-/// radiance that every viewer follows (see the module docs).
-pub fn baked_glb(
-    scene: &Scene,
-    mesh: &Mesh,
-    vertex_b: &[Rgb],
-    lightmap: Option<(&crate::mesh::atlas::Atlas, &[u8])>,
-    opts: &Options,
-) -> Result<(Vec<u8>, Stats)> {
+/// [`vertex_colors_glb`], and with a `lightmap` also `TEXCOORD_1` from its atlas and the
+/// lightmap wired in by its mode: every material's `emissiveTexture` over a black base
+/// colour (the core-glTF way that every viewer follows), or `MOZ_lightmap` under the
+/// materials' own colours and textures (see the module docs).
+pub fn baked_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], lightmap: Option<Lightmap<'_>>, opts: &Options) -> Result<(Vec<u8>, Stats)> {
     if vertex_b.len() != mesh.positions.len() {
         return Err(Error::Invalid(format!("{} vertex values for {} vertices", vertex_b.len(), mesh.positions.len())));
     }
@@ -284,57 +371,41 @@ pub fn baked_glb(
 
     // The lightmap image, stored first in the buffer.
     let mut buf = Buffer { bytes: Vec::new(), views: Vec::new(), accessors: Vec::new() };
-    let lightmap_texture = match lightmap {
-        None => None,
-        Some((_, png)) => {
-            buf.bytes.extend_from_slice(png);
-            let view = json::Index::push(
-                &mut buf.views,
-                json::buffer::View {
-                    buffer: json::Index::new(0),
-                    byte_length: USize64::from(png.len()),
-                    byte_offset: Some(USize64(0)),
-                    byte_stride: None,
-                    name: Some("lightmap".into()),
-                    target: None,
-                    extensions: None,
-                    extras: Default::default(),
-                },
-            );
-            while buf.bytes.len() % 4 != 0 {
-                buf.bytes.push(0);
-            }
-            let image = root.push(json::Image {
-                buffer_view: Some(view),
-                mime_type: Some(json::image::MimeType("image/png".into())),
-                name: Some("lightmap".into()),
-                uri: None,
-                extensions: None,
-                extras: Default::default(),
-            });
-            let sampler = root.push(json::texture::Sampler {
-                mag_filter: Some(Valid(json::texture::MagFilter::Linear)),
-                min_filter: Some(Valid(json::texture::MinFilter::Linear)),
-                name: None,
-                wrap_s: Valid(json::texture::WrappingMode::ClampToEdge),
-                wrap_t: Valid(json::texture::WrappingMode::ClampToEdge),
-                extensions: None,
-                extras: Default::default(),
-            });
-            Some(root.push(json::Texture {
-                name: Some("lightmap".into()),
-                sampler: Some(sampler),
-                source: image,
-                extensions: None,
-                extras: Default::default(),
-            }))
-        }
-    };
-    if lightmap.is_some() {
+    let clamp = [crate::scene::Wrap::ClampToEdge; 2];
+    let lightmap_texture = lightmap.map(|lm| push_png_texture(&mut root, &mut buf, "lightmap", lm.png, clamp, false));
+    let moz = lightmap.filter(|lm| lm.mode == LightmapMode::Moz);
+    if let Some(lm) = lightmap {
         root.extensions_used.clear();
+        if lm.mode == LightmapMode::Moz {
+            if !(lm.intensity.is_finite() && lm.intensity > 0.0) {
+                return Err(Error::Invalid(format!("lightmap intensity {} must be a positive number", lm.intensity)));
+            }
+            root.extensions_used.push("MOZ_lightmap".into());
+        }
+    }
+    // MOZ_lightmap: the base-colour textures kept (sRGB PNG, one glTF texture per scene
+    // texture and wrap mode).
+    let mut base_textures: BTreeMap<(u32, [u8; 2]), json::Index<json::Texture>> = BTreeMap::new();
+    if moz.is_some() {
+        for mat in &scene.materials {
+            let Some((tref, _)) = &mat.base_texture else { continue };
+            let key = (tref.texture, tref.wrap.map(|w| w as u8));
+            if base_textures.contains_key(&key) {
+                continue;
+            }
+            let tex = &scene.textures[tref.texture as usize];
+            let (w, h) = tex.size();
+            let rgb: Vec<u8> =
+                tex.texels().iter().flat_map(|t| t.map(|c| (255.0 * super::srgb_oetf(c as f64).clamp(0.0, 1.0)).round() as u8)).collect();
+            let png = super::png::encode_rgb8(w, h, &rgb)?;
+            let idx = push_png_texture(&mut root, &mut buf, &tex.name, &png, tref.wrap, true);
+            base_textures.insert(key, idx);
+        }
     }
 
-    // Materials used, in scene order.
+    // Materials used, in scene order. `MOZ_lightmap` objects by material index, added to
+    // the JSON at the end (gltf-json's typed materials have no field for it).
+    let mut moz_materials: Vec<(usize, serde_json::Value)> = Vec::new();
     let mut mat_index: BTreeMap<u32, json::Index<json::Material>> = BTreeMap::new();
     for &(_, m) in parts.keys() {
         if mat_index.contains_key(&m) {
@@ -346,8 +417,37 @@ pub fn baked_glb(
             "reflectance": mat.reflectance.to_array(), "emission": mat.emission.to_array()
         }});
         let extras = Some(serde_json::value::to_raw_value(&extras).map_err(|e| Error::Invalid(e.to_string()))?);
-        let material = match lightmap_texture {
-            None => json::Material {
+        let material = match (lightmap_texture, moz) {
+            (Some(tex), Some(lm)) => {
+                let (factor, base_color_texture) = match &mat.base_texture {
+                    Some((tref, factor)) => (
+                        *factor,
+                        Some(json::texture::Info {
+                            index: base_textures[&(tref.texture, tref.wrap.map(|w| w as u8))],
+                            tex_coord: 0,
+                            extensions: None,
+                            extras: Default::default(),
+                        }),
+                    ),
+                    None => (mat.reflectance, None),
+                };
+                moz_materials.push((root.materials.len(), serde_json::json!({ "index": tex.value(), "texCoord": 1, "intensity": lm.intensity })));
+                json::Material {
+                    name: Some(mat.name.clone()),
+                    pbr_metallic_roughness: json::material::PbrMetallicRoughness {
+                        base_color_factor: json::material::PbrBaseColorFactor([factor.x as f32, factor.y as f32, factor.z as f32, 1.0]),
+                        base_color_texture,
+                        metallic_factor: json::material::StrengthFactor(0.0),
+                        roughness_factor: json::material::StrengthFactor(1.0),
+                        ..Default::default()
+                    },
+                    emissive_factor: json::material::EmissiveFactor([emissive.x as f32, emissive.y as f32, emissive.z as f32]),
+                    double_sided: false,
+                    extras,
+                    ..Default::default()
+                }
+            }
+            (None, _) => json::Material {
                 name: Some(mat.name.clone()),
                 pbr_metallic_roughness: json::material::PbrMetallicRoughness {
                     base_color_factor: json::material::PbrBaseColorFactor([1.0; 4]),
@@ -364,7 +464,7 @@ pub fn baked_glb(
                 }),
                 ..Default::default()
             },
-            Some(tex) => json::Material {
+            (Some(tex), None) => json::Material {
                 name: Some(mat.name.clone()),
                 pbr_metallic_roughness: json::material::PbrMetallicRoughness {
                     base_color_factor: json::material::PbrBaseColorFactor([0.0, 0.0, 0.0, 1.0]),
@@ -392,25 +492,39 @@ pub fn baked_glb(
             .iter()
             .map(|&v| {
                 let l = vertex_b[v as usize].max(Rgb::ZERO) * (opts.exposure / std::f64::consts::PI);
-                stats.clipped += l.to_array().iter().filter(|x| **x > 1.0).count();
+                if moz.is_none() {
+                    stats.clipped += l.to_array().iter().filter(|x| **x > 1.0).count();
+                }
                 l.min(Rgb::ONE).as_vec3().to_array()
             })
             .collect();
         let vec3 = json::accessor::Type::Vec3;
         let a_pos = buf.push_f32(&pos, vec3, true);
         let a_nor = buf.push_f32(&nor, vec3, false);
-        let a_col = buf.push_f32(&col, vec3, false);
+        // MOZ_lightmap: no vertex colours (three.js would multiply the light in twice).
+        let a_col = moz.is_none().then(|| buf.push_f32(&col, vec3, false));
         let a_idx = buf.push_u32(&part.indices);
-        // TEXCOORD_0: each chart's own planar coordinates in scene units (a texture space
-        // with no seams inside a chart); TEXCOORD_1: the lightmap atlas.
-        let uvs = lightmap.map(|(atlas, _)| {
+        // TEXCOORD_0: the base-colour texture's coordinates (MOZ_lightmap, textured
+        // materials: the polygon's map of its coordinate set, the texture transform
+        // applied), else each chart's own planar coordinates in scene units (a texture
+        // space with no seams inside a chart); TEXCOORD_1: the lightmap atlas.
+        let base_tex = moz.and(scene.materials[*m as usize].base_texture.as_ref()).map(|(t, _)| t);
+        let uvs = lightmap.map(|lm| {
+            let atlas = lm.atlas;
             let (uv0, uv1): (Vec<[f32; 2]>, Vec<[f32; 2]>) = part
                 .vertices
                 .iter()
                 .zip(&part.patches)
                 .map(|(&v, &p)| {
                     let x = mesh.positions[v as usize];
-                    let q = atlas.frames[p as usize].at(x);
+                    let q = match base_tex.and_then(|t| scene.polygons[p as usize].uv.get(t.tex_coord as usize).map(|map| (t, map))) {
+                        Some((t, map)) => {
+                            let uv = map.at(x);
+                            let [a, b] = t.transform;
+                            glam::DVec2::new(a[0] * uv.x + a[1] * uv.y + a[2], b[0] * uv.x + b[1] * uv.y + b[2])
+                        }
+                        None => atlas.frames[p as usize].at(x),
+                    };
                     let (u, w) = atlas.uv(p, x);
                     ([q.x as f32, q.y as f32], [u as f32, w as f32])
                 })
@@ -423,7 +537,9 @@ pub fn baked_glb(
         let mut attributes = BTreeMap::new();
         attributes.insert(Valid(json::mesh::Semantic::Positions), a_pos);
         attributes.insert(Valid(json::mesh::Semantic::Normals), a_nor);
-        attributes.insert(Valid(json::mesh::Semantic::Colors(0)), a_col);
+        if let Some(a_col) = a_col {
+            attributes.insert(Valid(json::mesh::Semantic::Colors(0)), a_col);
+        }
         if let Some((a0, a1)) = uvs {
             attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), a0);
             attributes.insert(Valid(json::mesh::Semantic::TexCoords(1)), a1);
@@ -495,7 +611,19 @@ pub fn baked_glb(
     });
     root.buffer_views = buf.views;
     root.accessors = buf.accessors;
-    let json_bytes = root.to_vec().map_err(|e| Error::Invalid(format!("glTF JSON: {e}")))?;
+    let mut json_bytes = root.to_vec().map_err(|e| Error::Invalid(format!("glTF JSON: {e}")))?;
+    if !moz_materials.is_empty() {
+        let bad = |e: serde_json::Error| Error::Invalid(format!("glTF JSON: {e}"));
+        let mut v: serde_json::Value = serde_json::from_slice(&json_bytes).map_err(bad)?;
+        for (i, ext) in moz_materials {
+            let m = &mut v["materials"][i];
+            if !m.get("extensions").is_some_and(|e| e.is_object()) {
+                m["extensions"] = serde_json::json!({});
+            }
+            m["extensions"]["MOZ_lightmap"] = ext;
+        }
+        json_bytes = serde_json::to_vec(&v).map_err(bad)?;
+    }
     let glb = gltf::binary::Glb {
         header: gltf::binary::Header { magic: *b"glTF", version: 2, length: 0 },
         json: std::borrow::Cow::Owned(json_bytes),
@@ -503,6 +631,62 @@ pub fn baked_glb(
     };
     let bytes = glb.to_vec().map_err(|e| Error::Invalid(format!("GLB: {e}")))?;
     Ok((bytes, stats))
+}
+
+/// A PNG image stored in the buffer, with a linear-filtered sampler of the given wrap
+/// modes (mipmapped when `mipmaps`), as a glTF texture.
+fn push_png_texture(
+    root: &mut json::Root,
+    buf: &mut Buffer,
+    name: &str,
+    png: &[u8],
+    wrap: [crate::scene::Wrap; 2],
+    mipmaps: bool,
+) -> json::Index<json::Texture> {
+    let offset = buf.bytes.len();
+    buf.bytes.extend_from_slice(png);
+    let view = json::Index::push(
+        &mut buf.views,
+        json::buffer::View {
+            buffer: json::Index::new(0),
+            byte_length: USize64::from(png.len()),
+            byte_offset: Some(USize64::from(offset)),
+            byte_stride: None,
+            name: Some(name.into()),
+            target: None,
+            extensions: None,
+            extras: Default::default(),
+        },
+    );
+    while buf.bytes.len() % 4 != 0 {
+        buf.bytes.push(0);
+    }
+    let image = root.push(json::Image {
+        buffer_view: Some(view),
+        mime_type: Some(json::image::MimeType("image/png".into())),
+        name: Some(name.into()),
+        uri: None,
+        extensions: None,
+        extras: Default::default(),
+    });
+    let mode = |w: crate::scene::Wrap| {
+        Valid(match w {
+            crate::scene::Wrap::Repeat => json::texture::WrappingMode::Repeat,
+            crate::scene::Wrap::ClampToEdge => json::texture::WrappingMode::ClampToEdge,
+            crate::scene::Wrap::MirroredRepeat => json::texture::WrappingMode::MirroredRepeat,
+        })
+    };
+    let min = if mipmaps { json::texture::MinFilter::LinearMipmapLinear } else { json::texture::MinFilter::Linear };
+    let sampler = root.push(json::texture::Sampler {
+        mag_filter: Some(Valid(json::texture::MagFilter::Linear)),
+        min_filter: Some(Valid(min)),
+        name: None,
+        wrap_s: mode(wrap[0]),
+        wrap_t: mode(wrap[1]),
+        extensions: None,
+        extras: Default::default(),
+    });
+    root.push(json::Texture { name: Some(name.into()), sampler: Some(sampler), source: image, extensions: None, extras: Default::default() })
 }
 
 fn scene_center(scene: &Scene) -> DVec3 {

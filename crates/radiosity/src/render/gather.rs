@@ -191,14 +191,22 @@ impl<'a> Shader<'a> {
     /// share of `pat`; textures are read filtered over `footprint` (the area, in scene
     /// units², that the sample stands for). Returns the radiance and the rays cast.
     pub fn shade(&self, e: u32, p: glam::DVec3, k: usize, footprint: f64, pat: &mut Patterns) -> (Rgb, u64) {
-        let (scene, mesh, rays) = (self.scene, self.mesh, self.rays);
-        let el = &mesh.elements[e as usize];
-        let patch = el.patch as usize;
-        let mut l = scene.emission_at(patch, p, footprint);
-        let rho = scene.reflectance_at(patch, p, footprint);
+        let patch = self.mesh.elements[e as usize].patch as usize;
+        let l = self.scene.emission_at(patch, p, footprint);
+        let rho = self.scene.reflectance_at(patch, p, footprint);
         if rho.max_element() <= 0.0 {
             return (l, 0);
         }
+        let (h, nrays) = self.irradiance(e, p, k, pat);
+        (l + rho * h * (1.0 / std::f64::consts::PI), nrays)
+    }
+
+    /// Irradiance arriving at `p` on the front of element `e` (direct light of emitters,
+    /// the sun and the lights, and the indirect light), with the `k`-th position's share
+    /// of `pat`: what [`Shader::shade`] multiplies by ρ/π. Returns it and the rays cast.
+    pub fn irradiance(&self, e: u32, p: glam::DVec3, k: usize, pat: &mut Patterns) -> (Rgb, u64) {
+        let (scene, mesh, rays) = (self.scene, self.mesh, self.rays);
+        let el = &mesh.elements[e as usize];
         let m2 = self.shadow_axis * self.shadow_axis;
         let mut nrays = 0;
         let (mut hd, r) = if self.ems.len() <= LOOP_EMITTERS {
@@ -232,8 +240,7 @@ impl<'a> Shader<'a> {
                 gathered(mesh, rays, Some((locator, reflected)), self.sky_h, p, el.normal, el.patch, dirs)
             }
         };
-        l += rho * (hd + hi) * (1.0 / std::f64::consts::PI);
-        (l, nrays)
+        (hd + hi, nrays)
     }
 }
 

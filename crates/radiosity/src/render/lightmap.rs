@@ -70,10 +70,23 @@ fn rasterise(mesh: &Mesh, atlas: &Atlas) -> Vec<u32> {
     owner
 }
 
-/// Renders the lightmap of `atlas`: outgoing radiance per texel (linear), `element_l` is
-/// each element's radiance `B/π` (for charts too small to hold a texel). `opts` gives the
-/// shadow and gather rays per texel and the seed (its size and samples per pixel are not
-/// used: one position per texel, at its centre).
+/// What a lightmap's texels hold.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Quantity {
+    /// Outgoing radiance `L = Le + ρ·E/π` (what a display shows; texture detail at the
+    /// lightmap's resolution).
+    #[default]
+    Radiance,
+    /// Irradiance `E` arriving at the surface (W/m² or scene units), which a viewer
+    /// multiplies by its own base colour (texture included) over π: the `MOZ_lightmap`
+    /// convention of three.js's `lightMap`.
+    Irradiance,
+}
+
+/// Renders the lightmap of `atlas`: per texel (linear) the `quantity`; `element_l` is each
+/// element's value of it (radiance `B/π`, or irradiance) for charts too small to hold a
+/// texel. `opts` gives the shadow and gather rays per texel and the seed (its size and
+/// samples per pixel are not used: one position per texel, at its centre).
 #[allow(clippy::too_many_arguments)]
 pub fn render(
     scene: &Scene,
@@ -82,6 +95,7 @@ pub fn render(
     indirect: &Indirect,
     atlas: &Atlas,
     element_l: &[Rgb],
+    quantity: Quantity,
     opts: &Options,
     progress: &dyn Progress,
 ) -> (Image, Stats) {
@@ -117,7 +131,10 @@ pub fn render(
                 let p = atlas.world(mesh.elements[e as usize].patch, x as f64 + 0.5, y as f64 + 0.5);
                 let mut rng = rng_for(opts.seed, (y * n + x) as u64);
                 shader.draw(1, &mut rng, &mut pat);
-                let (l, r) = shader.shade(e, p, 0, atlas.texel * atlas.texel, &mut pat);
+                let (l, r) = match quantity {
+                    Quantity::Radiance => shader.shade(e, p, 0, atlas.texel * atlas.texel, &mut pat),
+                    Quantity::Irradiance => shader.irradiance(e, p, 0, &mut pat),
+                };
                 *px = l;
                 cast += r + 1;
             }

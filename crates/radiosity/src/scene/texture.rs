@@ -338,6 +338,11 @@ impl Texture {
         (self.levels[0].width, self.levels[0].height)
     }
 
+    /// The full-resolution texels (linear RGB, row-major from the top-left).
+    pub fn texels(&self) -> &[[f32; 3]] {
+        &self.levels[0].texels
+    }
+
     /// Bytes held (all levels).
     pub fn bytes(&self) -> usize {
         self.levels.iter().map(|l| l.texels.len() * 12).sum()

@@ -285,7 +285,15 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
         let mo = desc.materials.len() as u32;
         let oo = desc.objects.len() as u32;
         from_gltf.extend(std::iter::repeat_n(is_gltf, part.materials.len()));
-        desc.materials.extend(part.materials);
+        // Textures come along, renumbered after those of the meshes before.
+        let to = desc.textures.len() as u32;
+        desc.materials.extend(part.materials.into_iter().map(|mut m| {
+            for t in [&mut m.base_texture, &mut m.emission_texture].into_iter().flatten() {
+                t.texture += to;
+            }
+            m
+        }));
+        desc.textures.extend(part.textures);
         desc.objects.extend(part.objects);
         desc.polygons.extend(part.polygons.into_iter().map(|mut p| {
             p.material += mo;
