@@ -107,6 +107,17 @@ pub struct SolveFlags {
     /// [sky.sun] stays); 0 removes it.
     #[arg(long, value_name = "L", value_parser = parse_sky)]
     pub sky: Option<[f64; 3]>,
+    /// An environment image around the scene instead of a uniform sky: equirectangular,
+    /// linear radiance by direction, +Y up (.exr, .hdr; .png/.jpg as sRGB); replaces the
+    /// scene file's [sky] radiance or environment (its [sky.sun] stays).
+    #[arg(long, value_name = "FILE")]
+    pub sky_image: Option<std::path::PathBuf>,
+    /// Multiplies the --sky-image texels.
+    #[arg(long, value_name = "K", default_value_t = 1.0)]
+    pub sky_strength: f64,
+    /// Turns the --sky-image about +Y, degrees (counter-clockwise seen from above).
+    #[arg(long, value_name = "DEG", default_value_t = 0.0, allow_hyphen_values = true)]
+    pub sky_rotation: f64,
     /// A sun: the direction towards it and its irradiance on a surface facing it,
     /// X,Y,Z,E (E one value; replaces the scene file's [sky.sun], keeps its sky radiance;
     /// E = 0 removes it). Its disk is --sun-diameter wide.
@@ -219,22 +230,47 @@ impl SolveFlags {
         let mut desc = scene::load(&self.scene)?;
         desc.two_sided |= self.two_sided;
         desc.strict = self.strict;
+        if self.sky.is_some() && self.sky_image.is_some() {
+            anyhow::bail!("--sky and --sky-image: give a uniform sky or an environment image, not both");
+        }
         if let Some(l) = self.sky {
-            let sun = desc.sky.and_then(|s| s.sun);
+            let sun = desc.sky.as_ref().and_then(|s| s.sun);
             let radiance = radiosity::Rgb::from_array(l);
-            desc.sky = (radiance.max_element() > 0.0 || sun.is_some()).then_some(scene::Sky { radiance, sun });
+            desc.sky = (radiance.max_element() > 0.0 || sun.is_some()).then_some(scene::Sky { radiance, sun, environment: None });
+        }
+        if let Some(path) = &self.sky_image {
+            if !(self.sky_strength.is_finite() && self.sky_strength >= 0.0) {
+                anyhow::bail!("--sky-strength {} must be a finite number ≥ 0", self.sky_strength);
+            }
+            if !self.sky_rotation.is_finite() {
+                anyhow::bail!("--sky-rotation {} must be a finite number of degrees", self.sky_rotation);
+            }
+            let bytes = scene::read_input(path).map_err(|e| anyhow::anyhow!("--sky-image {}: {e}", path.display()))?;
+            let texture = scene::Texture::decode_environment(&path.display().to_string(), &bytes)
+                .map_err(|e| anyhow::anyhow!("--sky-image {}: {e}", path.display()))?;
+            let env = scene::Environment {
+                texture: std::sync::Arc::new(texture),
+                strength: self.sky_strength,
+                rotation_deg: self.sky_rotation,
+            };
+            let sun = desc.sky.as_ref().and_then(|s| s.sun);
+            desc.sky = Some(scene::Sky { radiance: radiosity::Rgb::ZERO, sun, environment: Some(env) });
+        } else if self.sky_strength != 1.0 || self.sky_rotation != 0.0 {
+            anyhow::bail!("--sky-strength and --sky-rotation need --sky-image");
         }
         if let Some([x, y, z, e]) = self.sun {
             if !(0.0..=scene::MAX_SUN_DIAMETER_DEG).contains(&self.sun_diameter) {
                 anyhow::bail!("--sun-diameter {} must be between 0 and {} degrees", self.sun_diameter, scene::MAX_SUN_DIAMETER_DEG);
             }
-            let radiance = desc.sky.map_or(radiosity::Rgb::ZERO, |s| s.radiance);
+            let radiance = desc.sky.as_ref().map_or(radiosity::Rgb::ZERO, |s| s.radiance);
+            let environment = desc.sky.as_ref().and_then(|s| s.environment.clone());
             let sun = (e > 0.0).then(|| scene::Sun {
                 direction: glam::DVec3::new(x, y, z),
                 irradiance: radiosity::Rgb::splat(e),
                 angular_diameter_deg: self.sun_diameter,
             });
-            desc.sky = (radiance.max_element() > 0.0 || sun.is_some()).then_some(scene::Sky { radiance, sun });
+            desc.sky = (radiance.max_element() > 0.0 || sun.is_some() || environment.is_some())
+                .then_some(scene::Sky { radiance, sun, environment });
         }
         let scene = Scene::from_desc(desc)?;
         for w in &scene.warnings {

@@ -80,3 +80,37 @@ fn bake_writes_a_glb_and_refuses_what_it_cannot_write() {
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("is not a folder") && !err.contains("iteration"), "{err}");
 }
+
+/// `--sky-image FILE --sky-strength K --sky-rotation DEG`: a floor alone under a constant
+/// image of radiance 0.5 at strength 2 reflects ρ·0.5·2 = 0.5; the flags that need an image
+/// or exclude one are refused before any work.
+#[test]
+fn sky_image_flag_lights_a_floor_and_refuses_conflicts() {
+    let f = floor();
+    let mut img = radiosity::render::Image::new(16, 8);
+    img.pixels.iter_mut().for_each(|p| *p = radiosity::Rgb::splat(0.5));
+    let exr = dir().join("const.exr");
+    std::fs::write(&exr, radiosity::output::exr::encode(&img).unwrap()).unwrap();
+    let report = dir().join("image.json");
+    let (code, err) = run(&[
+        "solve",
+        f.to_str().unwrap(),
+        "--sky-image",
+        exr.to_str().unwrap(),
+        "--sky-strength",
+        "2",
+        "--sky-rotation",
+        "-30",
+        "-q",
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    let l = floor_radiance(&report);
+    assert!((l - 0.5).abs() < 1e-6, "floor radiance {l}");
+    let (code, err) = run(&["solve", f.to_str().unwrap(), "--sky", "1", "--sky-image", exr.to_str().unwrap(), "-q"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("not both"), "{err}");
+    let (code, err) = run(&["solve", f.to_str().unwrap(), "--sky", "1", "--sky-rotation", "10", "-q"]);
+    assert!(code == Some(1) && err.contains("need --sky-image"), "{err}");
+}

@@ -708,8 +708,8 @@ pub fn render_radiosity(
 ) -> Image {
     let cam = PinholeCamera::new(camera, opts.width, opts.height);
     let vertex_b = reconstruct::vertex_radiosity(scene, mesh, element_b);
-    let sky = scene.lit_sky().map_or(Rgb::ZERO, |s| s.radiance);
-    gouraud::render(mesh, tracer, element_b, &vertex_b, &cam, opts, sky, progress)
+    let sky = |dir| scene.lit_sky().map_or(Rgb::ZERO, |s| s.radiance_in(dir, 0.0));
+    gouraud::render(mesh, tracer, element_b, &vertex_b, &cam, opts, &sky, progress)
 }
 
 impl Solved {
@@ -856,8 +856,8 @@ impl Solved {
     pub fn render(&self, camera: &Camera, opts: &gouraud::Options, tracer: &ElementTracer, progress: &dyn Progress) -> Image {
         let cam = PinholeCamera::new(camera, opts.width, opts.height);
         let display = self.solution.display_radiosity();
-        let sky = self.scene.lit_sky().map_or(Rgb::ZERO, |s| s.radiance);
-        gouraud::render(&self.mesh, tracer, &display, &self.vertex_radiosity, &cam, opts, sky, progress)
+        let sky = |dir| self.scene.lit_sky().map_or(Rgb::ZERO, |s| s.radiance_in(dir, 0.0));
+        gouraud::render(&self.mesh, tracer, &display, &self.vertex_radiosity, &cam, opts, &sky, progress)
     }
 
     /// A report with everything but the images and total time filled in.

@@ -18,6 +18,12 @@
 //! would otherwise let the sky leak into closed rooms. The final gather estimates `S(x)`
 //! per pixel with its gather rays ([`crate::render::gather`]).
 //!
+//! An environment image ([`crate::scene::Environment`]) gives each direction its own
+//! radiance: `H_sky(x) = ∫_Ω L_env(ω) V(x, ω) cos θ dω`, estimated per element as π times
+//! the mean of `L_env(ω)·V(x, ω)` over [`ENVIRONMENT_AXIS`]² cosine-distributed rays (the
+//! image read at the mip level of each ray's share of the hemisphere), and per pixel by the
+//! final gather's rays ([`environment_irradiance`]).
+//!
 //! A sun ([`crate::scene::Sun`]) adds `E_sun · max(0, n·ω) · V(x, ω)` averaged over the
 //! directions ω of its disk (uniform in solid angle): per element with rays from points
 //! spread over it ([`element_irradiance`]), per pixel with shadow rays in the final gather,
@@ -36,6 +42,10 @@ use crate::{Progress, Rgb};
 
 /// Rays per element for the exposure, as `axis × axis` stratified directions.
 pub const DEFAULT_AXIS: usize = 8;
+
+/// Rays per element under an environment image, as `axis × axis` stratified directions
+/// (more than a uniform sky's: the image varies by direction).
+pub const ENVIRONMENT_AXIS: usize = 16;
 
 /// Seed of the exposure's random streams (one per element).
 const SEED: u64 = 0x5c1e_5c1e;
@@ -68,6 +78,44 @@ pub fn exposure(mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, axis: usiz
         dirs.len() as u64
     });
     (s, cast)
+}
+
+/// Irradiance from an environment image on every element (zero for an element with no
+/// open area) and the rays cast: `π · mean(L_env(ω) V(x, ω))` over `axis × axis`
+/// cosine-distributed stratified directions, each from its own point of the element's open
+/// part, the image filtered over each ray's share `2π/axis²` of the hemisphere.
+pub fn environment_irradiance(
+    mesh: &Mesh,
+    rays: &SceneRays,
+    receivers: &Receivers,
+    env: &crate::scene::Environment,
+    axis: usize,
+    progress: &dyn Progress,
+) -> (Vec<Rgb>, u64) {
+    let axis = axis.max(1);
+    let share = std::f64::consts::TAU / (axis * axis) as f64;
+    let mut h = vec![Rgb::ZERO; mesh.len()];
+    let cast = crate::progress::for_each_chunked(&mut h, "sky exposure", progress, Vec::new, |e, h, dirs| {
+        let el = &mesh.elements[e];
+        if receivers.open_cells.get(e).copied().unwrap_or(u64::MAX) == 0 {
+            return 0;
+        }
+        let mut rng = rng_for(SEED, e as u64);
+        stratified(axis, &mut rng, dirs);
+        let (t, b) = basis(el.normal);
+        let mut sum = Rgb::ZERO;
+        for &(u1, u2) in dirs.iter() {
+            let p = open_point(mesh, receivers, e, &mut rng);
+            let d = cosine_hemisphere(u1, u2);
+            let dir = t * d.x + b * d.y + el.normal * d.z;
+            if rays.escapes(p.as_vec3(), dir.as_vec3(), Some(el.patch)) {
+                sum += env.radiance(dir, share);
+            }
+        }
+        *h = sum * (std::f64::consts::PI / dirs.len() as f64);
+        dirs.len() as u64
+    });
+    (h, cast)
 }
 
 /// An area-uniform random point of element `e`'s open part.
@@ -114,7 +162,7 @@ pub fn sun_factor_at(rays: &SceneRays, sun: &Sun, p: DVec3, n: DVec3, patch: u32
 }
 
 /// The irradiance the sky and its sun bring to every element directly (none without a lit
-/// sky): `π·L_sky·S_i + E_sun·⟨max(0, n·ω)·V⟩_i`, the sun's term from `axis × axis` points of
+/// sky): `π·L_sky·S_i` (or the environment's, [`environment_irradiance`]) `+ E_sun·⟨max(0, n·ω)·V⟩_i`, the sun's term from `axis × axis` points of
 /// the element's open part, each with its own direction in the disk. Also returns the rays.
 pub fn element_irradiance(
     scene: &Scene,
@@ -128,7 +176,13 @@ pub fn element_irradiance(
     };
     let mut cast = 0;
     let mut h = vec![Rgb::ZERO; mesh.len()];
-    if sky.radiance.max_element() > 0.0 {
+    if let Some(env) = &sky.environment {
+        let (he, n) = environment_irradiance(mesh, rays, receivers, env, ENVIRONMENT_AXIS, progress);
+        cast += n;
+        for (h, x) in h.iter_mut().zip(he) {
+            *h += x;
+        }
+    } else if sky.radiance.max_element() > 0.0 {
         let (s, n) = exposure(mesh, rays, receivers, DEFAULT_AXIS, progress);
         cast += n;
         for (h, s) in h.iter_mut().zip(s) {

@@ -54,7 +54,7 @@ fn open_box(h: f64, wall_rho: f64, lid: Option<f64>, sky: Option<f64>) -> Scene 
         let _ = k;
         d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material, object, loc: None });
     }
-    d.sky = sky.map(|l| Sky { radiance: Rgb::splat(l), sun: None });
+    d.sky = sky.map(|l| Sky::uniform(Rgb::splat(l)));
     Scene::from_desc(d).unwrap()
 }
 
@@ -135,7 +135,7 @@ fn no_sky_light_enters_a_closed_room() {
     for f in common::box_faces(DVec3::splat(0.3), DVec3::splat(0.6), false) {
         d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material: 1, object: 1, loc: None });
     }
-    d.sky = Some(Sky { radiance: Rgb::ONE, sun: None });
+    d.sky = Some(Sky::uniform(Rgb::ONE));
     let scene = Scene::from_desc(d).unwrap();
     scene.check_emits().expect("a sky is a light");
     let solved = solve_scene(scene, &Settings { mesh_size: Some(0.1), ..Default::default() }, &NoProgress).unwrap();
@@ -151,7 +151,7 @@ fn final_gather_shows_the_sky_and_a_plate_lit_by_it_exactly() {
     d.objects.push(ObjectDesc { name: "plate".into(), loc: None });
     let v = vec![DVec3::new(0., 0., 0.), DVec3::new(0., 0., 1.), DVec3::new(1., 0., 1.), DVec3::new(1., 0., 0.)];
     d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: v, material: 0, object: 0, loc: None });
-    d.sky = Some(Sky { radiance: Rgb::splat(l_sky), sun: None });
+    d.sky = Some(Sky::uniform(Rgb::splat(l_sky)));
     let scene = Scene::from_desc(d).unwrap();
     let solved = solve_scene(scene, &Settings { mesh_size: Some(0.1), ..Default::default() }, &NoProgress).unwrap();
     assert!(solved.external_irradiance.iter().all(|&h| h == Rgb::splat(PI * l_sky)));
@@ -210,7 +210,7 @@ fn closed_two_sided_room_leak(cluster_receivers: bool) -> (f64, f64, usize) {
     for f in common::box_faces(DVec3::new(0.3, 0.0, 0.3), DVec3::new(0.7, 0.4, 0.7), false) {
         d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material: 0, object: 1, loc: None });
     }
-    d.sky = Some(Sky { radiance: Rgb::ONE, sun: None });
+    d.sky = Some(Sky::uniform(Rgb::ONE));
     let scene = Scene::from_desc(d).unwrap();
     let mut s = settings(Kind::Hierarchical, form_factor::Method::PointSampled, Solver::Jacobi);
     s.links.min_size = Some(0.4);
@@ -293,7 +293,7 @@ fn sun_scene(direction: DVec3, with_roof: bool) -> Scene {
         d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: roof, material: 0, object: 1, loc: None });
     }
     let sun = radiosity::scene::Sun { direction, irradiance: Rgb::splat(100.0), angular_diameter_deg: 0.53 };
-    d.sky = Some(Sky { radiance: Rgb::ZERO, sun: Some(sun) });
+    d.sky = Some(Sky { radiance: Rgb::ZERO, sun: Some(sun), environment: None });
     Scene::from_desc(d).unwrap()
 }
 
@@ -306,7 +306,7 @@ fn sun_lights_an_open_floor_by_the_cosine_law() {
     let solved = solve_scene(scene, &Settings { mesh_size: Some(0.2), ..Default::default() }, &NoProgress).unwrap();
     // The disk's mean cosine is cos θ·(1 + cos r)/2; its 8 × 8 directions per element sample
     // the ±r·tan θ = ±0.8 % spread across it.
-    let cos_r = solved.scene.sky.unwrap().sun.unwrap().cos_radius();
+    let cos_r = solved.scene.sky.as_ref().unwrap().sun.unwrap().cos_radius();
     let exact = 0.5 * 100.0 * t.cos() * 0.5 * (1.0 + cos_r) / PI;
     for b in solved.solution.display_radiosity() {
         assert!((b.x / PI - exact).abs() < 1e-3 * exact, "L {} against {exact}", b.x / PI);
@@ -323,7 +323,7 @@ fn sun_casts_a_sharp_shadow() {
         .unwrap();
     let b = solved.solution.display_radiosity();
     // Overhead, the disk's mean cosine is (1 + cos r)/2.
-    let lit_b = 0.5 * 100.0 * 0.5 * (1.0 + solved.scene.sky.unwrap().sun.unwrap().cos_radius());
+    let lit_b = 0.5 * 100.0 * 0.5 * (1.0 + solved.scene.sky.as_ref().unwrap().sun.unwrap().cos_radius());
     let (mut shadow, mut lit) = (0, 0);
     for (i, e) in solved.mesh.elements.iter().enumerate() {
         if e.normal.y < 0.5 || e.centroid.y > 0.5 {
@@ -339,7 +339,7 @@ fn sun_casts_a_sharp_shadow() {
         }
     }
     assert!(shadow > 40 && lit > 1000, "{shadow} shadowed, {lit} lit elements");
-    let sun = solved.scene.sky.unwrap().sun.unwrap();
+    let sun = solved.scene.sky.as_ref().unwrap().sun.unwrap();
     let pts: Vec<(f64, f64)> = (0..16).map(|k| ((k % 4) as f64 / 4.0 + 0.1, (k / 4) as f64 / 4.0 + 0.1)).collect();
     let floor = solved.mesh.elements.iter().find(|e| e.normal.y > 0.5 && e.centroid.y < 0.5).unwrap().patch;
     for (x, expect) in [(1.0, 0.0), (1.2, 0.0), (1.3, 1.0), (0.2, 1.0)] {
@@ -355,7 +355,7 @@ fn final_gather_shows_the_sunlit_floor_and_the_sun() {
     let t = 30f64.to_radians();
     let dir = DVec3::new(t.sin(), t.cos(), 0.0);
     let solved = solve_scene(sun_scene(dir, false), &Settings { mesh_size: Some(0.2), ..Default::default() }, &NoProgress).unwrap();
-    let sun = solved.scene.sky.unwrap().sun.unwrap();
+    let sun = solved.scene.sky.as_ref().unwrap().sun.unwrap();
     let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
     let tracer = ElementTracer::new(&solved.mesh, &two);
     let opts = radiosity::render::gather::Options { width: 16, height: 16, spp_axis: 2, shadow_axis: 2, gather_axis: 2, seed: 5 };
@@ -371,4 +371,139 @@ fn final_gather_shows_the_sunlit_floor_and_the_sun() {
     let (img, _) = solved.render_gather(&up, &opts, &tracer, &indirect, &NoProgress);
     let l = sun.radiance().x;
     assert!(img.pixels.iter().all(|p| (p.x - l).abs() < 1e-9 * l), "sun pixels {} against {l}", img.pixels[0].x);
+}
+
+/// An equirectangular environment whose texel at direction d is `texel(d)`, `w × h`.
+fn environment(w: usize, h: usize, texel: impl Fn(DVec3) -> [f32; 3], rotation_deg: f64) -> radiosity::scene::Environment {
+    let mut t = Vec::with_capacity(w * h);
+    for j in 0..h {
+        for k in 0..w {
+            let (u, v) = ((k as f64 + 0.5) / w as f64, (j as f64 + 0.5) / h as f64);
+            let (phi, elev) = ((u - 0.5) * 2.0 * PI, (0.5 - v) * PI);
+            t.push(texel(DVec3::new(elev.cos() * phi.cos(), elev.sin(), elev.cos() * phi.sin())));
+        }
+    }
+    let texture = radiosity::scene::Texture::from_linear("env", w, h, t).unwrap();
+    radiosity::scene::Environment { texture: std::sync::Arc::new(texture), strength: 1.0, rotation_deg }
+}
+
+/// The documented mapping: every texel centre's direction reads that texel exactly, and a
+/// rotation of 90° shows what the image holds at +X towards −Z.
+#[test]
+fn environment_directions_follow_the_equirectangular_convention() {
+    let (w, h) = (8, 4);
+    let id = |d: DVec3| {
+        let u = d.z.atan2(d.x) / (2.0 * PI) + 0.5;
+        let v = 0.5 - d.y.asin() / PI;
+        let (k, j) = ((u * w as f64).floor() as usize % w, (v * h as f64).floor() as usize);
+        [(j * w + k) as f32, 0.0, 0.0]
+    };
+    let env = environment(w, h, id, 0.0);
+    let turned = environment(w, h, id, 90.0);
+    for j in 0..h {
+        for k in 0..w {
+            let (u, v) = ((k as f64 + 0.5) / w as f64, (j as f64 + 0.5) / h as f64);
+            let (phi, elev) = ((u - 0.5) * 2.0 * PI, (0.5 - v) * PI);
+            let d = DVec3::new(elev.cos() * phi.cos(), elev.sin(), elev.cos() * phi.sin());
+            let want = (j * w + k) as f64;
+            assert!((env.radiance(d, 0.0).x - want).abs() < 1e-5, "texel ({k}, {j}): {}", env.radiance(d, 0.0));
+            // R_y(90°): (x, y, z) -> (z, y, -x).
+            let r = DVec3::new(d.z, d.y, -d.x);
+            assert!((turned.radiance(r, 0.0).x - want).abs() < 1e-5, "turned texel ({k}, {j})");
+        }
+    }
+    // +X is the middle of the image (u = 1/2), the zenith its top row.
+    let mid = environment(8, 4, |d| [if d.x > 0.7 { 1.0 } else { 0.0 }, (1.0 + d.y) as f32, 0.0], 0.0);
+    assert!(mid.radiance(DVec3::X, 0.0).x > 0.0 && mid.radiance(DVec3::NEG_X, 0.0).x == 0.0);
+    assert!(mid.radiance(DVec3::Y, 0.0).y > 1.9 && mid.radiance(DVec3::NEG_Y, 0.0).y < 0.1);
+}
+
+/// Closed forms under an environment image L(d) = a + b·d_y (red) and c (green): a plate
+/// facing up receives π·a + 2π·b/3, one facing +X receives π·a (the d_y term cancels), and
+/// the constant channel π·c on both; the final reflection is ρ·E/π. Camera rays that leave
+/// the scene straight up see a + b.
+#[test]
+fn environment_image_lights_surfaces_by_direction() {
+    let (a, b, c, rho) = (1.0, 0.8, 0.5, 0.5);
+    let mut d = SceneDesc { name: "env".into(), ..Default::default() };
+    d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(rho)));
+    let plates = [
+        ("up", vec![DVec3::new(0., 0., 0.), DVec3::new(0., 0., 1.), DVec3::new(1., 0., 1.), DVec3::new(1., 0., 0.)]),
+        // Facing +X, far below the first plate's plane and beside it: they cannot see each other.
+        ("side", vec![DVec3::new(10., -5., 0.), DVec3::new(10., -4., 0.), DVec3::new(10., -4., 1.), DVec3::new(10., -5., 1.)]),
+    ];
+    for (k, (name, v)) in plates.into_iter().enumerate() {
+        d.objects.push(ObjectDesc { name: name.into(), loc: None });
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: v, material: 0, object: k as u32, loc: None });
+    }
+    let env = environment(512, 256, |dir| [(a + b * dir.y) as f32, c as f32, 0.0], 37.0);
+    d.sky = Some(Sky { radiance: Rgb::ZERO, sun: None, environment: Some(env) });
+    let scene = Scene::from_desc(d).unwrap();
+    let s = Settings { mesh_size: Some(0.25), ..Default::default() };
+    let solved = solve_scene(scene, &s, &NoProgress).unwrap();
+    let obj = |name: &str| Rgb::from_array(solved.objects().into_iter().find(|o| o.name == name).unwrap().radiance_rgb);
+    let (up, side) = (obj("up"), obj("side"));
+    let want_up = Rgb::new(rho * (a + 2.0 * b / 3.0), rho * c, 0.0);
+    let want_side = Rgb::new(rho * a, rho * c, 0.0);
+    eprintln!("up {up} (want {want_up}), side {side} (want {want_side})");
+    for (got, want) in [(up, want_up), (side, want_side)] {
+        for ch in 0..2 {
+            assert!((got[ch] - want[ch]).abs() <= 5e-3 * want[ch], "{got} against {want}");
+        }
+    }
+    // Straight up, a 10° view: every pixel shows a + b·d_y with d_y ≥ cos 7.1°.
+    let cam = Camera { position: DVec3::new(0.5, 1.0, 0.5), look_at: DVec3::new(0.5, 2.0, 0.5), up: DVec3::Z, vfov_deg: 10.0 };
+    let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
+    let tracer = ElementTracer::new(&solved.mesh, &two);
+    let gouraud = radiosity::render::gouraud::Options { width: 16, height: 16, spp_axis: 2, shading: radiosity::render::gouraud::Shading::Gouraud };
+    let opts = radiosity::render::gather::Options { width: 16, height: 16, spp_axis: 2, shadow_axis: 2, gather_axis: 2, seed: 1 };
+    let (gathered, _) = solved.render_gather(&cam, &opts, &tracer, &solved.indirect(true), &NoProgress);
+    for img in [solved.render(&cam, &gouraud, &tracer, &NoProgress), gathered] {
+        for p in &img.pixels {
+            assert!(p.x > a + b * 0.99 && p.x < a + b + 1e-6 && (p.y - c).abs() < 1e-6, "sky pixel {p}");
+        }
+    }
+}
+
+/// `[sky] image = "FILE"` in TOML: an EXR (written by our own encoder) and a Radiance
+/// .hdr read as linear radiance, `strength` and `rotation` applied; clear errors for a
+/// radiance given with it, a negative strength, a missing file and a NaN texel.
+#[test]
+fn environment_files_load_from_toml_with_clear_errors() {
+    let dir = std::env::temp_dir().join(format!("radiosity-env-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // 4 × 2: the top row 3.0, the bottom row 0.25 (red), green 1.5 everywhere.
+    let mut img = radiosity::render::Image::new(4, 2);
+    for (k, p) in img.pixels.iter_mut().enumerate() {
+        *p = Rgb::new(if k < 4 { 3.0 } else { 0.25 }, 1.5, 0.0);
+    }
+    std::fs::write(dir.join("env.exr"), radiosity::output::exr::encode(&img).unwrap()).unwrap();
+    let mut hdr = Vec::new();
+    let px: Vec<image::Rgb<f32>> = img.pixels.iter().map(|p| image::Rgb([p.x as f32, p.y as f32, p.z as f32])).collect();
+    image::codecs::hdr::HdrEncoder::new(&mut hdr).encode(&px, 4, 2).unwrap();
+    std::fs::write(dir.join("env.hdr"), hdr).unwrap();
+    for file in ["env.exr", "env.hdr"] {
+        let toml = format!("mesh = \"builtin:cornell\"\n[sky]\nimage = \"{file}\"\nstrength = 2.0\nrotation = 45\n");
+        std::fs::write(dir.join("s.toml"), toml).unwrap();
+        let desc = radiosity::scene::load(dir.join("s.toml").to_str().unwrap()).unwrap();
+        let env = desc.sky.as_ref().unwrap().environment.as_ref().unwrap();
+        assert_eq!((env.strength, env.rotation_deg), (2.0, 45.0));
+        let (up, down) = (env.radiance(DVec3::Y, 0.0), env.radiance(DVec3::NEG_Y, 0.0));
+        // Radiance HDR keeps 8-bit mantissas: 1 % there.
+        let tol = if file.ends_with("hdr") { 1e-2 } else { 1e-6 };
+        assert!((up - Rgb::new(6.0, 3.0, 0.0)).abs().max_element() <= tol * 6.0, "{file}: up {up}");
+        assert!((down - Rgb::new(0.5, 3.0, 0.0)).abs().max_element() <= tol * 3.0, "{file}: down {down}");
+    }
+    let bad = |body: &str, want: &str| {
+        std::fs::write(dir.join("b.toml"), format!("mesh = \"builtin:cornell\"\n[sky]\n{body}\n")).unwrap();
+        let e = radiosity::scene::load(dir.join("b.toml").to_str().unwrap()).unwrap_err().to_string();
+        assert!(e.contains(want) && e.contains("b.toml"), "{body}: {e}");
+    };
+    bad("image = \"env.exr\"\nradiance = 1", "not both");
+    bad("image = \"env.exr\"\nstrength = -1", "strength -1");
+    bad("image = \"missing.exr\"", "missing.exr");
+    bad("radiance = 1\nrotation = 10", "belong to an image");
+    img.pixels[5] = Rgb::new(f64::NAN, 0.0, 0.0);
+    std::fs::write(dir.join("nan.exr"), radiosity::output::exr::encode(&img).unwrap()).unwrap();
+    bad("image = \"nan.exr\"", "texel (1, 1)");
 }

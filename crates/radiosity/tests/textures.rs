@@ -271,7 +271,7 @@ fn floor_under_sky(transform: Option<Value>) -> Scene {
     let path = tmp("floor-sky.gltf");
     d.write(&path, materials, json!([{"source": 0, "sampler": 0}]), images, json!([{"wrapS": 33071, "wrapT": 33071}]));
     let mut desc = scene::load(path.to_str().unwrap()).unwrap();
-    desc.sky = Some(Sky { radiance: Rgb::ONE, sun: None });
+    desc.sky = Some(Sky::uniform(Rgb::ONE));
     Scene::from_desc(desc).unwrap()
 }
 

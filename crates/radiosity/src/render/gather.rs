@@ -116,10 +116,9 @@ pub struct Shader<'a> {
     rays: &'a SceneRays,
     indirect: &'a Indirect,
     ems: Vec<crate::direct::Emitter>,
-    sky: Option<Rgb>,
+    /// The lit sky (its radiance by direction; None: black).
+    sky: Option<&'a crate::scene::Sky>,
     sun: Option<crate::scene::Sun>,
-    /// Exitance of the sky seen by a gather ray that leaves the scene.
-    sky_h: Rgb,
     shadow_axis: usize,
     /// Gather (or sky) rays per position along each axis; 0: none.
     gather_axis: usize,
@@ -139,11 +138,11 @@ pub struct Patterns {
 impl<'a> Shader<'a> {
     /// The shader of a solved scene; `opts` gives the shadow and gather rays per position.
     pub fn new(scene: &'a Scene, mesh: &'a Mesh, rays: &'a SceneRays, indirect: &'a Indirect, opts: &Options) -> Self {
-        let sky = scene.lit_sky().map(|s| s.radiance);
+        let sky = scene.lit_sky().filter(|s| s.has_radiance());
         let gather_axis = match indirect {
             Indirect::Gathered { .. } => opts.gather_axis.max(1),
             // Rays for the sky alone.
-            Indirect::Interpolated(_) if sky.is_some() => SKY_AXIS,
+            Indirect::Interpolated(_) if scene.lit_sky().is_some() => SKY_AXIS,
             Indirect::Interpolated(_) => 0,
         };
         Shader {
@@ -154,7 +153,6 @@ impl<'a> Shader<'a> {
             ems: emitters(scene),
             sky,
             sun: scene.lit_sky().and_then(|s| s.lit_sun()),
-            sky_h: sky.map_or(Rgb::ZERO, |l| l * std::f64::consts::PI),
             shadow_axis: opts.shadow_axis.max(1),
             gather_axis,
         }
@@ -178,7 +176,7 @@ impl<'a> Shader<'a> {
     /// What a camera ray in direction `dir` that meets nothing sees: the sky, and the
     /// sun's disk.
     pub fn background(&self, dir: glam::DVec3) -> Rgb {
-        let mut l = self.sky.unwrap_or(Rgb::ZERO);
+        let mut l = self.sky.map_or(Rgb::ZERO, |s| s.radiance_in(dir, 0.0));
         if let Some(sun) = &self.sun {
             if dir.normalize().dot(sun.direction) >= sun.cos_radius() && sun.angular_diameter_deg > 0.0 {
                 l += sun.radiance();
@@ -231,13 +229,17 @@ impl<'a> Shader<'a> {
         let g2 = self.gather_axis * self.gather_axis;
         let dirs = &pat.gather[k * g2..(k + 1) * g2];
         nrays += g2 as u64;
+        // Exitance π·L of the sky seen by a gather ray that leaves the scene, the image read
+        // over the ray's share of the hemisphere.
+        let share = std::f64::consts::TAU / g2.max(1) as f64;
+        let sky = |dir: glam::DVec3| self.sky.map_or(Rgb::ZERO, |s| s.radiance_in(dir, share) * std::f64::consts::PI);
         let hi = match self.indirect {
             Indirect::Interpolated(hv) if g2 > 0 => {
-                interpolate(mesh, e, p, hv) + gathered(mesh, rays, None, self.sky_h, p, el.normal, el.patch, dirs)
+                interpolate(mesh, e, p, hv) + gathered(mesh, rays, None, &sky, p, el.normal, el.patch, dirs)
             }
             Indirect::Interpolated(hv) => interpolate(mesh, e, p, hv),
             Indirect::Gathered { reflected, locator } => {
-                gathered(mesh, rays, Some((locator, reflected)), self.sky_h, p, el.normal, el.patch, dirs)
+                gathered(mesh, rays, Some((locator, reflected)), &sky, p, el.normal, el.patch, dirs)
             }
         };
         (hd + hi, nrays)
@@ -321,7 +323,7 @@ fn gathered(
     mesh: &Mesh,
     rays: &SceneRays,
     elements: Option<(&Locator, &[Rgb])>,
-    sky: Rgb,
+    sky: &dyn Fn(glam::DVec3) -> Rgb,
     p: glam::DVec3,
     n: glam::DVec3,
     patch: u32,
@@ -334,13 +336,13 @@ fn gathered(
         let dir = t * d.x + b * d.y + n * d.z;
         let Some((locator, reflected)) = elements else {
             if rays.escapes(p.as_vec3(), dir.as_vec3(), Some(patch)) {
-                sum += sky;
+                sum += sky(dir);
             }
             continue;
         };
         let hit = rays.closest_facing(p.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(patch));
         if hit.is_none() {
-            sum += sky;
+            sum += sky(dir);
         } else if let Some(j) = locator.front_hit(mesh, rays, p, dir, hit) {
             sum += reflected[j as usize];
         }

@@ -176,8 +176,8 @@ pub fn inverse_bilinear(p: DVec3, c: &[DVec3; 4], normal: DVec3) -> (f64, f64) {
 /// Renders the mesh with per-vertex radiosity `vertex_b` (Gouraud) or per-element
 /// radiosity `element_b` (flat). Primary visibility comes from the rasteriser
 /// ([`super::raster`]); each sample's surface point is its camera ray's intersection with
-/// the visible element's plane. A sample that sees no element shows `background` (the sky's
-/// radiance, or zero).
+/// the visible element's plane. A sample that sees no element shows `background` of its
+/// direction (the sky's radiance, or zero).
 #[allow(clippy::too_many_arguments)]
 pub fn render(
     mesh: &Mesh,
@@ -186,7 +186,7 @@ pub fn render(
     vertex_b: &[Rgb],
     cam: &PinholeCamera,
     opts: &Options,
-    background: Rgb,
+    background: &(dyn Fn(glam::DVec3) -> Rgb + Sync),
     progress: &dyn Progress,
 ) -> Image {
     let (w, h) = (opts.width, opts.height);
@@ -211,7 +211,8 @@ pub fn render(
                     let k = (y * s + sj) * ids.width + x * s + si;
                     let e = ids.ids[k];
                     if e == u32::MAX {
-                        acc += background * std::f64::consts::PI; // (divided by π below)
+                        let dir = cam.direction(x as f64 + (si as f64 + 0.5) / s as f64, y as f64 + (sj as f64 + 0.5) / s as f64);
+                        acc += background(dir) * std::f64::consts::PI; // (divided by π below)
                         continue;
                     }
                     if !front[e as usize] {

@@ -232,16 +232,63 @@ pub struct PolygonDesc {
     pub uvs: Vec<Vec<DVec2>>,
 }
 
-/// A uniform sky: every ray that leaves the geometry sees the same radiance (a constant
-/// environment, Mitsuba's `constant` emitter). Under it a surface point's irradiance is
-/// `π·L_sky·S(x)`, with `S(x)` the cosine-weighted fraction of its hemisphere that sees
-/// no polygon (its sky exposure); see [`crate::sky`].
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// A sky: what every ray that leaves the geometry sees. Uniform, every direction the same
+/// radiance (a constant environment, Mitsuba's `constant` emitter: under it a surface
+/// point's irradiance is `π·L_sky·S(x)`, with `S(x)` the cosine-weighted fraction of its
+/// hemisphere that sees no polygon, its sky exposure), or an equirectangular
+/// [`Environment`] image; and a sun. See [`crate::sky`].
+#[derive(Clone, Debug, PartialEq)]
 pub struct Sky {
-    /// Radiance of the sky, linear RGB (same units as `Ke`).
+    /// Radiance of the sky, linear RGB (same units as `Ke`); with an environment, zero.
     pub radiance: Rgb,
     /// A sun: a distant disk of light, seen by rays that leave the scene towards it.
     pub sun: Option<Sun>,
+    /// An environment image: the radiance by direction (instead of `radiance`).
+    pub environment: Option<Environment>,
+}
+
+/// An equirectangular (latitude–longitude) environment: linear radiance by direction, +Y
+/// up, as three.js's `EquirectangularReflectionMapping` reads it: the image's top row is
+/// the zenith, its middle column looks along +X, and u grows from −X through −Z… as
+///
+/// ```text
+/// u = atan2(d.z, d.x) / 2π + 1/2,   v = 1/2 − asin(d.y) / π   (v down the image)
+/// ```
+///
+/// for the direction `d` turned by `−rotation_deg` about +Y, times `strength`: what the
+/// image shows in direction `m` is seen in direction `R_y(rotation)·m` (a positive rotation
+/// turns the environment counter-clockwise seen from above; 90° brings +X to −Z).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Environment {
+    /// The image (linear texels, with its mip pyramid).
+    pub texture: Arc<Texture>,
+    /// Multiplies every texel.
+    pub strength: f64,
+    /// Turn about +Y, degrees.
+    pub rotation_deg: f64,
+}
+
+impl Environment {
+    /// Radiance seen in direction `dir` (any length), filtered over about `solid_angle`
+    /// steradians (0: the finest level).
+    pub fn radiance(&self, dir: DVec3, solid_angle: f64) -> Rgb {
+        let d = dir.normalize_or_zero();
+        let (s, c) = self.rotation_deg.to_radians().sin_cos();
+        let d = DVec3::new(c * d.x - s * d.z, d.y, s * d.x + c * d.z);
+        let u = d.z.atan2(d.x) / std::f64::consts::TAU + 0.5;
+        let v = 0.5 - d.y.clamp(-1.0, 1.0).asin() / std::f64::consts::PI;
+        let (w, h) = self.texture.size();
+        // A texel at the equator spans (2π/w)·(π/h) steradians.
+        let texel = std::f64::consts::TAU * std::f64::consts::PI / (w * h) as f64;
+        let lod = if solid_angle > texel { 0.5 * (solid_angle / texel).log2() } else { 0.0 };
+        let tref = TextureRef { wrap: [texture::Wrap::Repeat, texture::Wrap::ClampToEdge], ..TextureRef::new(0, 0) };
+        self.texture.sample(&tref, DVec2::new(u, v), lod) * self.strength
+    }
+
+    /// The largest radiance of any texel.
+    pub fn max(&self) -> Rgb {
+        self.texture.max * self.strength
+    }
 }
 
 /// The sun of a [`Sky`]: a disk of uniform radiance at infinity.
@@ -276,9 +323,31 @@ impl Sun {
 }
 
 impl Sky {
+    /// A uniform sky of radiance `radiance`, with no sun.
+    pub fn uniform(radiance: Rgb) -> Sky {
+        Sky { radiance, sun: None, environment: None }
+    }
+
     /// True if the sky or its sun gives light.
     pub fn is_lit(&self) -> bool {
-        self.radiance.max_element() > 0.0 || self.sun.is_some_and(|s| s.is_lit())
+        self.radiance.max_element() > 0.0
+            || self.sun.is_some_and(|s| s.is_lit())
+            || self.environment.as_ref().is_some_and(|e| e.max().max_element() > 0.0)
+    }
+
+    /// True if the sky itself (not its sun) gives light.
+    pub fn has_radiance(&self) -> bool {
+        self.radiance.max_element() > 0.0 || self.environment.as_ref().is_some_and(|e| e.max().max_element() > 0.0)
+    }
+
+    /// Radiance of the sky seen in direction `dir` (the sun's disk not included), filtered
+    /// over about `solid_angle` steradians.
+    #[inline]
+    pub fn radiance_in(&self, dir: DVec3, solid_angle: f64) -> Rgb {
+        match &self.environment {
+            Some(env) => env.radiance(dir, solid_angle),
+            None => self.radiance,
+        }
     }
 
     /// The sun, if it gives light.
@@ -527,8 +596,8 @@ impl Scene {
     }
 
     /// The sky, if it gives light.
-    pub fn lit_sky(&self) -> Option<Sky> {
-        self.sky.filter(Sky::is_lit)
+    pub fn lit_sky(&self) -> Option<&Sky> {
+        self.sky.as_ref().filter(|s| s.is_lit())
     }
 
     /// True if some polygon emits light, the sky gives light or there is a light.

@@ -333,6 +333,42 @@ impl Texture {
         Texture::from_linear(name, w, h, texels)
     }
 
+    /// An environment image (see [`super::Environment`]): OpenEXR (its first RGB(A)
+    /// layer) or Radiance `.hdr` as linear radiance, PNG or JPEG as sRGB like any texture.
+    /// Errors for a non-finite or negative texel.
+    pub fn decode_environment(name: &str, bytes: &[u8]) -> Result<Texture, String> {
+        let (w, h, texels): (usize, usize, Vec<[f32; 3]>) = if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+            use exr::prelude::*;
+            let img = read()
+                .no_deep_data()
+                .largest_resolution_level()
+                .rgba_channels(
+                    |res: Vec2<usize>, _| (res.width(), res.height(), vec![[0f32; 3]; res.width() * res.height()]),
+                    |img: &mut (usize, usize, Vec<[f32; 3]>), pos: Vec2<usize>, (r, g, b, _a): (f32, f32, f32, f32)| {
+                        let w = img.0;
+                        img.2[pos.y() * w + pos.x()] = [r, g, b];
+                    },
+                )
+                .first_valid_layer()
+                .all_attributes()
+                .from_buffered(std::io::Cursor::new(bytes))
+                .map_err(|e| format!("cannot read EXR: {e}"))?;
+            img.layer_data.channel_data.pixels
+        } else if bytes.starts_with(b"#?") {
+            let img = image::load_from_memory_with_format(bytes, image::ImageFormat::Hdr)
+                .map_err(|e| format!("cannot read Radiance HDR: {e}"))?
+                .to_rgb32f();
+            let (w, h) = (img.width() as usize, img.height() as usize);
+            (w, h, img.pixels().map(|p| p.0).collect())
+        } else {
+            return Texture::decode(name, bytes);
+        };
+        if let Some(k) = texels.iter().position(|t| t.iter().any(|c| !(c.is_finite() && *c >= 0.0))) {
+            return Err(format!("texel ({}, {}) is {:?}: radiance must be finite and non-negative", k % w.max(1), k / w.max(1), texels[k]));
+        }
+        Texture::from_linear(name, w, h, texels)
+    }
+
     /// Width and height of the image, in texels.
     pub fn size(&self) -> (usize, usize) {
         (self.levels[0].width, self.levels[0].height)

@@ -30,6 +30,11 @@
 //! [sky]                        # optional: a uniform sky around the geometry
 //! radiance = 1.0               # radiance of every direction that sees no polygon
 //!                              # (one value or [r, g, b]; same units as emission)
+//! # image = "studio.hdr"       # or an equirectangular environment image (.hdr, .exr;
+//! #                            # .png/.jpg as sRGB) of linear radiance by direction, +Y
+//! #                            # up (see scene::Environment), instead of `radiance`
+//! # strength = 1.0             # multiplies the image's texels
+//! # rotation = 0.0             # degrees about +Y (counter-clockwise from above)
 //! [sky.sun]                    # optional: a sun (with or without a sky radiance)
 //! direction = [0.3, 1, 0.2]    # towards the sun (normalised)
 //! irradiance = 1000            # on a surface facing it, unshadowed (exitance units)
@@ -144,6 +149,9 @@ struct LightToml {
 #[serde(deny_unknown_fields)]
 struct SkyToml {
     radiance: Option<Spanned<Radiance>>,
+    image: Option<Spanned<String>>,
+    strength: Option<Spanned<f64>>,
+    rotation: Option<Spanned<f64>>,
     sun: Option<Spanned<SunToml>>,
 }
 
@@ -375,10 +383,38 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
                 })
             }
         };
-        if sky.get_ref().radiance.is_none() && sun.is_none() {
-            return Err(Error::input(at(sky.span()), "[sky]: give a radiance, a [sky.sun], or both"));
+        let sk = sky.get_ref();
+        let environment = match &sk.image {
+            None => {
+                if let Some(k) = sk.strength.as_ref().or(sk.rotation.as_ref()) {
+                    return Err(Error::input(at(k.span()), "[sky]: strength and rotation belong to an image"));
+                }
+                None
+            }
+            Some(f) => {
+                if let Some(r) = &sk.radiance {
+                    return Err(Error::input(at(r.span()), "[sky]: give a radiance or an image, not both"));
+                }
+                let strength = sk.strength.as_ref().map_or(Ok(1.0), |v| match *v.get_ref() {
+                    x if x.is_finite() && x >= 0.0 => Ok(x),
+                    x => Err(Error::input(at(v.span()), format!("[sky]: strength {x} must be a finite number ≥ 0"))),
+                })?;
+                let rotation = sk.rotation.as_ref().map_or(Ok(0.0), |v| match *v.get_ref() {
+                    x if x.is_finite() => Ok(x),
+                    x => Err(Error::input(at(v.span()), format!("[sky]: rotation {x} must be a finite number of degrees"))),
+                })?;
+                let path = dir.join(f.get_ref());
+                let bytes = super::read_input(&path)
+                    .map_err(|e| Error::input(at(f.span()), format!("[sky]: image '{}': {e}", path.display())))?;
+                let texture = super::Texture::decode_environment(&path.display().to_string(), &bytes)
+                    .map_err(|e| Error::input(at(f.span()), format!("[sky]: image '{}': {e}", path.display())))?;
+                Some(super::Environment { texture: std::sync::Arc::new(texture), strength, rotation_deg: rotation })
+            }
+        };
+        if sk.radiance.is_none() && sun.is_none() && environment.is_none() {
+            return Err(Error::input(at(sky.span()), "[sky]: give a radiance or an image, a [sky.sun], or both"));
         }
-        desc.sky = Some(super::Sky { radiance, sun });
+        desc.sky = Some(super::Sky { radiance, sun, environment });
     }
     if let Some(th) = &spec.thermal {
         let edges = &th.get_ref().band_edges;
@@ -686,11 +722,11 @@ mod tests {
     #[test]
     fn sky_takes_one_radiance_or_three_and_checks_them() {
         let d = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = 1.5\n").unwrap();
-        assert_eq!(d.sky, Some(crate::scene::Sky { radiance: Rgb::splat(1.5), sun: None }));
+        assert_eq!(d.sky, Some(crate::scene::Sky::uniform(Rgb::splat(1.5))));
         let d = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = [0.1, 0.2, 0.3]\n").unwrap();
-        assert_eq!(d.sky, Some(crate::scene::Sky { radiance: Rgb::new(0.1, 0.2, 0.3), sun: None }));
+        assert_eq!(d.sky, Some(crate::scene::Sky::uniform(Rgb::new(0.1, 0.2, 0.3))));
         let d = parse("mesh = \"builtin:cornell\"\n[sky.sun]\ndirection = [0, 2, 0]\nirradiance = 100\n").unwrap();
-        let sun = d.sky.unwrap().sun.unwrap();
+        let sun = d.sky.clone().unwrap().sun.unwrap();
         assert_eq!((sun.direction, sun.irradiance, sun.angular_diameter_deg), (DVec3::Y, Rgb::splat(100.0), 0.53));
         assert_eq!(d.sky.unwrap().radiance, Rgb::ZERO);
         let e = parse("mesh = \"builtin:cornell\"\n[sky.sun]\ndirection = [0, 0, 0]\nirradiance = 1\n").unwrap_err();
