@@ -539,3 +539,71 @@ fn moz_lightmap_keeps_the_texture_and_holds_the_irradiance() {
         }
     }
 }
+
+/// Issue 11, "the input scene's nodes kept": a glTF whose quads hang under a translated,
+/// turned group node, one of them mirrored (scale −1), bakes back into the same node tree
+/// (names, parents, transforms) with each object's mesh in its node's frame; read again,
+/// every object has the same area, facing (area-weighted normal) and bounds in the scene
+/// as the input's, the mirrored one included.
+#[test]
+fn bake_keeps_the_gltf_node_tree() {
+    let v = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
+    let mut d = Doc::new();
+    d.quad("floor", [v(0., 0., 0.), v(0., 0., 2.), v(2., 0., 2.), v(2., 0., 0.)], 0, None);
+    d.quad("wall", [v(0., 0., 0.), v(2., 0., 0.), v(2., 2., 0.), v(0., 2., 0.)], 0, None);
+    d.quad("lamp", [v(0.7, 1.9, 0.7), v(1.3, 1.9, 0.7), v(1.3, 1.9, 1.3), v(0.7, 1.9, 1.3)], 1, None);
+    let path = tmp("nodes.gltf");
+    let grey = json!({"name": "grey", "pbrMetallicRoughness": {"baseColorFactor": [0.6, 0.6, 0.6, 1.0]}});
+    let lamp = json!({"name": "lamp", "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0]}, "emissiveFactor": [1.0, 1.0, 1.0]});
+    d.write(&path, json!([grey, lamp]), json!([]), json!([]), json!([]));
+    // Re-parent: group (translated, turned 90° about +Y) > floor (mirrored in x), wall, lamp.
+    let mut j: Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    j["nodes"][0]["scale"] = json!([-1.0, 1.0, 1.0]);
+    let s = std::f64::consts::FRAC_1_SQRT_2;
+    j["nodes"].as_array_mut().unwrap().push(json!({"name": "group", "translation": [3.0, 0.5, -1.0], "rotation": [0.0, s, 0.0, s], "children": [0, 1, 2]}));
+    j["scenes"][0]["nodes"] = json!([3]);
+    std::fs::write(&path, serde_json::to_string(&j).unwrap()).unwrap();
+
+    let scene = scene::load_scene(path.to_str().unwrap()).unwrap();
+    let solved = solve_scene(scene, &Settings { mesh_size: Some(0.5), ..Default::default() }, &NoProgress).unwrap();
+    let opts = radiosity::output::gltf::Options { exposure: 1.0, camera: None, generator: "test".into() };
+    let (glb, _) = radiosity::output::gltf::vertex_colors_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, &opts).unwrap();
+    let out = tmp("nodes-baked.glb");
+    std::fs::write(&out, &glb).unwrap();
+    // The tree: group at the root with the three objects as its children, transforms kept.
+    let doc: Value = serde_json::from_slice(&gltf::binary::Glb::from_slice(&glb).unwrap().json).unwrap();
+    let nodes = doc["nodes"].as_array().unwrap();
+    let by_name = |n: &str| nodes.iter().position(|x| x["name"] == n).unwrap_or_else(|| panic!("no node {n}"));
+    let group = by_name("group");
+    let kids: Vec<u64> = nodes[group]["children"].as_array().unwrap().iter().map(|c| c.as_u64().unwrap()).collect();
+    for name in ["floor", "wall", "lamp"] {
+        assert!(kids.contains(&(by_name(name) as u64)), "{name} is not a child of group");
+        assert!(nodes[by_name(name)]["mesh"].is_u64(), "{name} has no mesh");
+    }
+    assert_eq!(doc["scenes"][0]["nodes"][0], group);
+    let m: Vec<f64> = nodes[by_name("floor")]["matrix"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    assert!((glam::DMat4::from_cols_slice(&m).determinant() + 1.0).abs() < 1e-6, "floor's mirror lost: {m:?}");
+    // Read back: the same geometry in the scene, facing the same way.
+    let back = scene::load_scene(out.to_str().unwrap()).unwrap();
+    let summary = |s: &Scene, name: &str| {
+        let o = s.objects.iter().position(|o| o.name == name).unwrap() as u32;
+        let (mut area, mut n, mut lo, mut hi) = (0.0, DVec3::ZERO, DVec3::splat(f64::MAX), DVec3::splat(f64::MIN));
+        for p in s.polygons.iter().filter(|p| p.object == o) {
+            area += p.area;
+            n += p.normal * p.area;
+            for x in &p.vertices {
+                lo = lo.min(*x);
+                hi = hi.max(*x);
+            }
+        }
+        (area, n / area, lo, hi)
+    };
+    for name in ["floor", "wall", "lamp"] {
+        let (a0, n0, lo0, hi0) = summary(&solved.scene, name);
+        let (a1, n1, lo1, hi1) = summary(&back, name);
+        eprintln!("{name}: area {a0} -> {a1}, normal {n0} -> {n1}");
+        assert!((a1 - a0).abs() < 1e-5 * a0, "{name}: area {a1} against {a0}");
+        assert!((n1 - n0).length() < 1e-5, "{name}: facing {n1} against {n0}");
+        assert!((lo1 - lo0).abs().max_element() < 1e-5 && (hi1 - hi0).abs().max_element() < 1e-5, "{name}: bounds moved");
+    }
+}

@@ -48,8 +48,9 @@
 //! per cent of the diffuse light for its specular layer; `MeshLambertMaterial` shows the
 //! formula above exactly (the check page and the viewer switch to it).
 //!
-//! Geometry: one node per scene object (its name), one mesh with one triangle primitive
-//! per material; quadrilateral elements are split into two triangles; vertices are the
+//! Geometry: one node per scene object (its name) — for a glTF input, the input's own node
+//! tree (names, local transforms, children) with each object's mesh on its node, in that
+//! node's frame — one mesh with one triangle primitive per material; quadrilateral elements are split into two triangles; vertices are the
 //! mesh's, which are shared inside a patch and separate across patches, so light stays
 //! continuous on a wall and sharp at its corners. Both sides of a two-sided surface are
 //! written (opposite windings, `doubleSided` false), each with its own light. Positions are
@@ -483,10 +484,37 @@ pub fn baked_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], lightmap: Option<
         mat_index.insert(m, idx);
     }
 
+    // Objects of a glTF input go back into their nodes: positions and normals in the node's
+    // own frame (p = W⁻¹·x, n ∝ Wᵀ·n), and the winding reversed under a mirroring
+    // transform, which viewers reverse again.
+    let tree = scene.node_tree.as_deref().filter(|t| t.object_nodes.len() <= scene.objects.len());
+    let frame = |object: u32| -> Option<(glam::DMat4, DMat3, bool)> {
+        let t = tree?;
+        let w = t.nodes[*t.object_nodes.get(object as usize)? as usize].world;
+        let inv = w.inverse();
+        inv.is_finite().then(|| (inv, DMat3::from_mat4(w).transpose(), w.determinant() < 0.0))
+    };
     let mut meshes: BTreeMap<u32, Vec<json::mesh::Primitive>> = BTreeMap::new();
     for ((object, m), part) in &parts {
-        let pos: Vec<[f32; 3]> = part.vertices.iter().map(|&v| mesh.positions[v as usize].as_vec3().to_array()).collect();
-        let nor: Vec<[f32; 3]> = part.normals.iter().map(|n| n.as_vec3().to_array()).collect();
+        let local = frame(*object);
+        let pos: Vec<[f32; 3]> = part
+            .vertices
+            .iter()
+            .map(|&v| {
+                let x = mesh.positions[v as usize];
+                local.map_or(x, |(inv, _, _)| inv.transform_point3(x)).as_vec3().to_array()
+            })
+            .collect();
+        let nor: Vec<[f32; 3]> =
+            part.normals.iter().map(|n| local.map_or(*n, |(_, nt, _)| (nt * *n).normalize_or_zero()).as_vec3().to_array()).collect();
+        let flipped: Vec<u32>;
+        let indices = match local {
+            Some((_, _, true)) => {
+                flipped = part.indices.chunks(3).flat_map(|t| [t[0], t[2], t[1]]).collect();
+                &flipped
+            }
+            _ => &part.indices,
+        };
         let col: Vec<[f32; 3]> = part
             .vertices
             .iter()
@@ -503,7 +531,7 @@ pub fn baked_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], lightmap: Option<
         let a_nor = buf.push_f32(&nor, vec3, false);
         // MOZ_lightmap: no vertex colours (three.js would multiply the light in twice).
         let a_col = moz.is_none().then(|| buf.push_f32(&col, vec3, false));
-        let a_idx = buf.push_u32(&part.indices);
+        let a_idx = buf.push_u32(indices);
         // TEXCOORD_0: the base-colour texture's coordinates (MOZ_lightmap, textured
         // materials: the polygon's map of its coordinate set, the texture transform
         // applied), else each chart's own planar coordinates in scene units (a texture
@@ -555,6 +583,23 @@ pub fn baked_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], lightmap: Option<
         });
     }
     let mut scene_nodes = Vec::new();
+    // The input's node tree first (names, local transforms, children), its objects' meshes
+    // on their nodes; other objects as nodes of their own at the root.
+    let mut tree_nodes: Vec<json::Index<json::Node>> = Vec::new();
+    if let Some(t) = tree {
+        for n in &t.nodes {
+            let matrix = (n.local != glam::DMat4::IDENTITY).then(|| n.local.as_mat4().to_cols_array());
+            let idx = root.push(json::Node { name: n.name.clone(), matrix, ..Default::default() });
+            match n.parent {
+                Some(p) => {
+                    let parent = &mut root.nodes[tree_nodes[p as usize].value()];
+                    parent.children.get_or_insert_with(Vec::new).push(idx);
+                }
+                None => scene_nodes.push(idx),
+            }
+            tree_nodes.push(idx);
+        }
+    }
     for (object, primitives) in meshes {
         let name = scene.objects[object as usize].name.clone();
         let mesh_idx = root.push(json::Mesh {
@@ -564,7 +609,10 @@ pub fn baked_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], lightmap: Option<
             primitives,
             weights: None,
         });
-        scene_nodes.push(root.push(json::Node { mesh: Some(mesh_idx), name: Some(name), ..Default::default() }));
+        match tree.and_then(|t| t.object_nodes.get(object as usize)).filter(|_| frame(object).is_some()) {
+            Some(&n) => root.nodes[tree_nodes[n as usize].value()].mesh = Some(mesh_idx),
+            None => scene_nodes.push(root.push(json::Node { mesh: Some(mesh_idx), name: Some(name), ..Default::default() })),
+        }
     }
     if let Some(c) = &opts.camera {
         let diag = scene.diagonal().max(f64::MIN_POSITIVE);

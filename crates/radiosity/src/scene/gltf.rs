@@ -331,6 +331,8 @@ struct Instance {
     node: usize,
     mesh: usize,
     world: DMat4,
+    /// Its node's place in the node tree.
+    tree: u32,
 }
 
 struct Reader<'a, F> {
@@ -403,7 +405,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             }
         }
 
-        let (instances, camera, light_nodes) = self.traverse()?;
+        let (instances, camera, light_nodes, tree) = self.traverse()?;
 
         // Triangles of each mesh drawn, in the mesh's frame.
         let mut meshes: HashMap<usize, MeshTris> = HashMap::new();
@@ -439,6 +441,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             0
         };
 
+        let mut object_nodes = Vec::with_capacity(instances.len());
         for inst in &instances {
             let node = &root.nodes[inst.node];
             let name = name_or(&node.name, || {
@@ -446,6 +449,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
             });
             let object = desc.objects.len() as u32;
             desc.objects.push(ObjectDesc { name, loc: Some(self.at("nodes", inst.node)) });
+            object_nodes.push(inst.tree);
             let flip = inst.world.determinant() < 0.0;
             let mesh_loc = self.at("meshes", inst.mesh);
             for tri in &meshes[&inst.mesh].tris {
@@ -485,6 +489,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
         }
         desc.camera = camera;
         desc.textures = std::mem::take(&mut self.textures);
+        desc.node_tree = Some(std::sync::Arc::new(super::NodeTree { nodes: tree, object_nodes }));
         self.lights(&light_nodes, &mut desc)?;
         desc.warnings = std::mem::take(&mut self.warnings);
         Ok(desc)
@@ -564,7 +569,10 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
     /// the first perspective camera, and the nodes that place a KHR_lights_punctual light
     /// (node, light, world matrix).
     #[allow(clippy::type_complexity)]
-    fn traverse(&mut self) -> Result<(Vec<Instance>, Option<Camera>, Vec<(usize, usize, DMat4)>)> {
+    /// The instances to draw, the first camera, the punctual lights' (node, light, world)
+    /// and the node tree reached (parents first; `Instance::tree` indexes it).
+    #[allow(clippy::type_complexity)]
+    fn traverse(&mut self) -> Result<(Vec<Instance>, Option<Camera>, Vec<(usize, usize, DMat4)>, Vec<super::SceneNode>)> {
         let root = self.root;
         let roots: Vec<usize> = if root.scenes.is_empty() {
             // No scene: every node that is nobody's child.
@@ -593,9 +601,11 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
         let mut camera: Option<Camera> = None;
         let mut visited: HashSet<usize> = HashSet::new();
         let mut warned_skin = false;
-        let mut stack: Vec<(usize, DMat4, Option<usize>)> =
-            roots.iter().rev().map(|&n| (n, DMat4::IDENTITY, None)).collect();
-        while let Some((ni, parent, from)) = stack.pop() {
+        let mut tree: Vec<super::SceneNode> = Vec::new();
+        // (node, parent's world, parent node, parent's place in `tree`)
+        let mut stack: Vec<(usize, DMat4, Option<usize>, Option<u32>)> =
+            roots.iter().rev().map(|&n| (n, DMat4::IDENTITY, None, None)).collect();
+        while let Some((ni, parent, from, parent_t)) = stack.pop() {
             let Some(node) = root.nodes.get(ni) else {
                 let msg = format!("node index {ni} is out of range (there are {} nodes)", root.nodes.len());
                 return Err(match from {
@@ -610,7 +620,10 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
                     format!("{} is reached twice: the node hierarchy must be a tree (no cycles, one parent)", self.node_label(ni)),
                 ));
             }
-            let world = parent * self.local_matrix(ni)?;
+            let local = self.local_matrix(ni)?;
+            let world = parent * local;
+            let here_t = tree.len() as u32;
+            tree.push(super::SceneNode { name: node.name.clone(), local, world, parent: parent_t });
             if let Some(m) = node.mesh {
                 let mi = m.value();
                 if mi >= root.meshes.len() {
@@ -625,7 +638,7 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
                     warned_skin = true;
                     self.warn(self.at("nodes", ni), "skins and morph targets are ignored: meshes are read in their rest pose");
                 }
-                instances.push(Instance { node: ni, mesh: mi, world });
+                instances.push(Instance { node: ni, mesh: mi, world, tree: here_t });
             }
             let light = self.raw.get("nodes").and_then(|n| n.get(ni)).and_then(|n| n.get("extensions")).and_then(|x| x.get("KHR_lights_punctual"));
             if let Some(l) = light {
@@ -640,10 +653,10 @@ impl<F: FnMut(&str) -> std::io::Result<Vec<u8>>> Reader<'_, F> {
                 camera = self.camera(ni, c.value(), world);
             }
             for c in node.children.iter().flatten().rev() {
-                stack.push((c.value(), world, Some(ni)));
+                stack.push((c.value(), world, Some(ni), Some(here_t)));
             }
         }
-        Ok((instances, camera, lights))
+        Ok((instances, camera, lights, tree))
     }
 
     /// A node's own transform: its matrix, or translation × rotation × scale.

@@ -447,6 +447,32 @@ pub struct SceneDesc {
     /// Wavelengths in µm, increasing, that split the spectrum into bands for a thermal
     /// solve with per-band emissivities (TOML `[thermal] band_edges`; empty: grey).
     pub band_edges: Vec<f64>,
+    /// The node hierarchy of a glTF input (None for other inputs, or several meshes).
+    pub node_tree: Option<Arc<NodeTree>>,
+}
+
+/// The node hierarchy of a glTF scene as read (the nodes reached from its scene), kept so
+/// that `radiosity bake` can write the baked scene back with the same nodes, names and
+/// transforms ([`crate::output::gltf`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NodeTree {
+    /// The nodes, parents before their children.
+    pub nodes: Vec<SceneNode>,
+    /// Per object (index into the scene's objects, all from this file): its node.
+    pub object_nodes: Vec<u32>,
+}
+
+/// One node of a [`NodeTree`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneNode {
+    /// Its name in the file.
+    pub name: Option<String>,
+    /// Its own transform (relative to its parent).
+    pub local: glam::DMat4,
+    /// Its transform to the scene (the product down from its root).
+    pub world: glam::DMat4,
+    /// Its parent (index into [`NodeTree::nodes`]); None for a root.
+    pub parent: Option<u32>,
 }
 
 /// A validated material.
@@ -554,6 +580,8 @@ pub struct Scene {
     pub textures: Vec<Arc<Texture>>,
     /// Thermal band edges in µm (validated: finite, positive, increasing).
     pub band_edges: Vec<f64>,
+    /// The node hierarchy of a glTF input (see [`SceneDesc::node_tree`]).
+    pub node_tree: Option<Arc<NodeTree>>,
 }
 
 impl Scene {

@@ -302,6 +302,8 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
             m
         }));
         desc.textures.extend(part.textures);
+        // A glTF's node tree stays with the scene when it is the only mesh.
+        desc.node_tree = if mesh_specs.len() == 1 { part.node_tree } else { None };
         desc.objects.extend(part.objects);
         desc.polygons.extend(part.polygons.into_iter().map(|mut p| {
             p.material += mo;

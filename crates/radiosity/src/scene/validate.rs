@@ -31,6 +31,7 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
         lights,
         textures,
         band_edges,
+        node_tree,
     } = desc;
     // The scene's file: where its polygons came from (built-in scenes: the name).
     let file = polygons.iter().find_map(|p| p.loc.as_ref().map(|l| l.file.clone())).unwrap_or_else(|| name.clone().into());
@@ -393,7 +394,22 @@ pub(super) fn validate(desc: SceneDesc) -> Result<Scene> {
     if let Some(e) = band_edges.iter().find(|e| !(e.is_finite() && **e > 0.0)) {
         return Err(Error::Invalid(format!("thermal band edge {e} µm must be finite and positive")));
     }
-    Ok(Scene { name, materials: mats, objects: objs, polygons: out, camera, warnings, obstructions, file, lost_light, sky, lights, textures, band_edges })
+    Ok(Scene {
+        name,
+        materials: mats,
+        objects: objs,
+        polygons: out,
+        camera,
+        warnings,
+        obstructions,
+        file,
+        lost_light,
+        sky,
+        lights,
+        textures,
+        band_edges,
+        node_tree,
+    })
 }
 
 /// Polygons skipped for one reason: how many, and the first.
