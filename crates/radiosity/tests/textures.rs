@@ -607,3 +607,45 @@ fn bake_keeps_the_gltf_node_tree() {
         assert!((lo1 - lo0).abs().max_element() < 1e-5 && (hi1 - hi0).abs().max_element() < 1e-5, "{name}: bounds moved");
     }
 }
+
+/// Under MOZ_lightmap an emission texture is kept too (MTL map_Ke on the lamp): the lamp's
+/// material shows it as its emissiveTexture (the texels back byte for byte), with Ke × the
+/// exposure as the factor.
+#[test]
+fn moz_bake_keeps_emission_textures() {
+    use radiosity::mesh::atlas::{Atlas, Options as AtlasOptions};
+    use radiosity::output::gltf::{baked_glb, moz_lightmap_png, Lightmap, LightmapMode, Options};
+    use radiosity::render::lightmap::{self, Quantity};
+    let dir = tmp("moz-emission");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("glow.png"), png(2, 2, |x, y| [100 + 50 * x as u8, 120, 140 + 20 * y as u8])).unwrap();
+    std::fs::write(dir.join("e.mtl"), "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl glow\nKd 0 0 0\nKe 0.4 0.4 0.4\nmap_Ke glow.png\n").unwrap();
+    std::fs::write(
+        dir.join("e.obj"),
+        "mtllib e.mtl\nv 0 0 0\nv 0 0 1\nv 1 0 1\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 1 1 1\nv 0 1 1\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+         usemtl grey\nf 1 2 3 4\nusemtl glow\nf 5/1 6/2 7/3 8/4\n",
+    )
+    .unwrap();
+    let scene = scene::load_scene(dir.join("e.obj").to_str().unwrap()).unwrap();
+    let solved = solve_scene(scene, &Settings { mesh_size: Some(0.5), ..Default::default() }, &NoProgress).unwrap();
+    let atlas = Atlas::build(&solved.scene, &AtlasOptions { size: 64, ..Default::default() }).unwrap();
+    let l: Vec<_> = solved.solution.display_radiosity().iter().map(|b| *b / PI).collect();
+    let gopts = gather::Options { width: 64, height: 64, spp_axis: 1, shadow_axis: 1, gather_axis: 0, seed: 1 };
+    let (irr, _) = lightmap::render(&solved.scene, &solved.mesh, &solved.rays, &solved.indirect(false), &atlas, &l, Quantity::Irradiance, &gopts, &NoProgress);
+    let k = 2.0;
+    let (png_bytes, intensity, _) = moz_lightmap_png(&irr, k).unwrap();
+    let lm = Lightmap { atlas: &atlas, png: &png_bytes, mode: LightmapMode::Moz, intensity };
+    let opts = Options { exposure: k, camera: None, generator: "test".into() };
+    let (glb, _) = baked_glb(&solved.scene, &solved.mesh, &solved.vertex_radiosity, Some(lm), &opts).unwrap();
+    let g = gltf::Gltf::from_slice(&glb).unwrap();
+    let blob = g.blob.as_deref().unwrap();
+    let glow = g.materials().find(|m| m.name() == Some("glow")).unwrap();
+    let f = glow.emissive_factor();
+    assert!(f.iter().all(|c| (c - 0.8).abs() < 1e-6), "emissive factor {f:?}");
+    let tex = glow.emissive_texture().expect("emission texture kept");
+    let gltf::image::Source::View { view, .. } = tex.texture().source().source() else { panic!("image not in the buffer") };
+    let img = image::load_from_memory(&blob[view.offset()..view.offset() + view.length()]).unwrap().to_rgb8();
+    for (x, y, p) in img.enumerate_pixels() {
+        assert_eq!(p.0, [100 + 50 * x as u8, 120, 140 + 20 * y as u8], "glow texel ({x}, {y})");
+    }
+}

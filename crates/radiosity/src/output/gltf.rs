@@ -384,23 +384,24 @@ pub fn baked_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], lightmap: Option<
             root.extensions_used.push("MOZ_lightmap".into());
         }
     }
-    // MOZ_lightmap: the base-colour textures kept (sRGB PNG, one glTF texture per scene
-    // texture and wrap mode).
+    // MOZ_lightmap: the base-colour and emission textures kept (sRGB PNG, one glTF texture
+    // per scene texture and wrap mode).
     let mut base_textures: BTreeMap<(u32, [u8; 2]), json::Index<json::Texture>> = BTreeMap::new();
     if moz.is_some() {
-        for mat in &scene.materials {
-            let Some((tref, _)) = &mat.base_texture else { continue };
-            let key = (tref.texture, tref.wrap.map(|w| w as u8));
-            if base_textures.contains_key(&key) {
-                continue;
+        for m in parts.keys().map(|k| &scene.materials[k.1 as usize]) {
+            for tref in [m.base_texture.as_ref().map(|t| &t.0), kept_emission(m)].into_iter().flatten() {
+                let key = (tref.texture, tref.wrap.map(|w| w as u8));
+                if base_textures.contains_key(&key) {
+                    continue;
+                }
+                let tex = &scene.textures[tref.texture as usize];
+                let (w, h) = tex.size();
+                let rgb: Vec<u8> =
+                    tex.texels().iter().flat_map(|t| t.map(|c| (255.0 * super::srgb_oetf(c as f64).clamp(0.0, 1.0)).round() as u8)).collect();
+                let png = super::png::encode_rgb8(w, h, &rgb)?;
+                let idx = push_png_texture(&mut root, &mut buf, &tex.name, &png, tref.wrap, true);
+                base_textures.insert(key, idx);
             }
-            let tex = &scene.textures[tref.texture as usize];
-            let (w, h) = tex.size();
-            let rgb: Vec<u8> =
-                tex.texels().iter().flat_map(|t| t.map(|c| (255.0 * super::srgb_oetf(c as f64).clamp(0.0, 1.0)).round() as u8)).collect();
-            let png = super::png::encode_rgb8(w, h, &rgb)?;
-            let idx = push_png_texture(&mut root, &mut buf, &tex.name, &png, tref.wrap, true);
-            base_textures.insert(key, idx);
         }
     }
 
@@ -433,6 +434,20 @@ pub fn baked_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], lightmap: Option<
                     None => (mat.reflectance, None),
                 };
                 moz_materials.push((root.materials.len(), serde_json::json!({ "index": tex.value(), "texCoord": 1, "intensity": lm.intensity })));
+                // An emission texture on the same coordinates: kept, its factor × exposure
+                // (clipped to 1) as the emissive factor.
+                let (emissive, emissive_texture) = match (kept_emission(mat), &mat.emission_texture) {
+                    (Some(tref), Some((_, factor))) => (
+                        (*factor * opts.exposure).min(Rgb::ONE),
+                        Some(json::texture::Info {
+                            index: base_textures[&(tref.texture, tref.wrap.map(|w| w as u8))],
+                            tex_coord: 0,
+                            extensions: None,
+                            extras: Default::default(),
+                        }),
+                    ),
+                    _ => (emissive, None),
+                };
                 json::Material {
                     name: Some(mat.name.clone()),
                     pbr_metallic_roughness: json::material::PbrMetallicRoughness {
@@ -443,6 +458,7 @@ pub fn baked_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], lightmap: Option<
                         ..Default::default()
                     },
                     emissive_factor: json::material::EmissiveFactor([emissive.x as f32, emissive.y as f32, emissive.z as f32]),
+                    emissive_texture,
                     double_sided: false,
                     extras,
                     ..Default::default()
@@ -536,7 +552,8 @@ pub fn baked_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], lightmap: Option<
         // materials: the polygon's map of its coordinate set, the texture transform
         // applied), else each chart's own planar coordinates in scene units (a texture
         // space with no seams inside a chart); TEXCOORD_1: the lightmap atlas.
-        let base_tex = moz.and(scene.materials[*m as usize].base_texture.as_ref()).map(|(t, _)| t);
+        let mat = &scene.materials[*m as usize];
+        let base_tex = moz.and(mat.base_texture.as_ref().map(|(t, _)| t).or(kept_emission(mat)));
         let uvs = lightmap.map(|lm| {
             let atlas = lm.atlas;
             let (uv0, uv1): (Vec<[f32; 2]>, Vec<[f32; 2]>) = part
@@ -679,6 +696,18 @@ pub fn baked_glb(scene: &Scene, mesh: &Mesh, vertex_b: &[Rgb], lightmap: Option<
     };
     let bytes = glb.to_vec().map_err(|e| Error::Invalid(format!("GLB: {e}")))?;
     Ok((bytes, stats))
+}
+
+/// Under `MOZ_lightmap`, the emission texture that is written with a material: one on the
+/// base-colour texture's coordinates (set and transform), or any when there is no
+/// base-colour texture (it then gives `TEXCOORD_0`). Others are shown by their mean.
+fn kept_emission(m: &crate::scene::Material) -> Option<&crate::scene::TextureRef> {
+    let (e, _) = m.emission_texture.as_ref()?;
+    match &m.base_texture {
+        None => Some(e),
+        Some((b, _)) if b.tex_coord == e.tex_coord && b.transform == e.transform => Some(e),
+        Some(_) => None,
+    }
 }
 
 /// A PNG image stored in the buffer, with a linear-filtered sampler of the given wrap
