@@ -15,7 +15,7 @@ if (!fs.existsSync(path.join(here, 'node_modules', 'three'))) {
   console.error(`three.js is not installed here: run  npm install  in ${here}`);
   process.exit(2);
 }
-const types = { '.html': 'text/html', '.js': 'text/javascript', '.glb': 'model/gltf-binary' };
+const types = { '.html': 'text/html', '.js': 'text/javascript', '.mjs': 'text/javascript', '.glb': 'model/gltf-binary' };
 const server = http.createServer((req, res) => {
   let u = decodeURIComponent(new URL(req.url, 'http://x').pathname);
   if (u === '/') u = '/index.html';

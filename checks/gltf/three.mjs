@@ -27,8 +27,10 @@ const ref = PNG.sync.read(fs.readFileSync(ours));
 const types = { '.html': 'text/html', '.js': 'text/javascript', '.mjs': 'text/javascript', '.glb': 'model/gltf-binary' };
 const server = http.createServer((req, res) => {
   const u = new URL(req.url, 'http://x').pathname;
-  const file = u === '/scene.glb' ? glb : path.join(here, path.normalize(u));
-  if (!file.startsWith(here) && file !== glb) { res.writeHead(403); return res.end(); }
+  // The MOZ_lightmap loader plugin is the viewer's own.
+  const plugin = path.join(here, '..', '..', 'viewer', 'moz_lightmap.mjs');
+  const file = u === '/scene.glb' ? glb : u === '/moz_lightmap.mjs' ? plugin : path.join(here, path.normalize(u));
+  if (!file.startsWith(here) && file !== glb && file !== plugin) { res.writeHead(403); return res.end(); }
   fs.readFile(file, (err, data) => {
     if (err) { res.writeHead(404); return res.end(); }
     res.writeHead(200, { 'Content-Type': types[path.extname(file)] || 'application/octet-stream' });
