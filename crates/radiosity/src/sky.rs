@@ -55,29 +55,8 @@ const SEED: u64 = 0x5c1e_5c1e;
 /// the element's open part (area-uniform within a random open cell). Stops early, leaving
 /// zeros, when `progress` asks to.
 pub fn exposure(mesh: &Mesh, rays: &SceneRays, receivers: &Receivers, axis: usize, progress: &dyn Progress) -> (Vec<f64>, u64) {
-    let axis = axis.max(1);
-    let mut s = vec![0.0; mesh.len()];
-    let cast = crate::progress::for_each_chunked(&mut s, "sky exposure", progress, Vec::new, |e, s, dirs| {
-        let el = &mesh.elements[e];
-        if receivers.open_cells.get(e).copied().unwrap_or(u64::MAX) == 0 {
-            return 0;
-        }
-        let mut rng = rng_for(SEED, e as u64);
-        stratified(axis, &mut rng, dirs);
-        let (t, b) = basis(el.normal);
-        let mut seen = 0usize;
-        for &(u1, u2) in dirs.iter() {
-            let p = open_point(mesh, receivers, e, &mut rng);
-            let d = cosine_hemisphere(u1, u2);
-            let dir = t * d.x + b * d.y + el.normal * d.z;
-            if rays.escapes(p.as_vec3(), dir.as_vec3(), Some(el.patch)) {
-                seen += 1;
-            }
-        }
-        *s = seen as f64 / dirs.len() as f64;
-        dirs.len() as u64
-    });
-    (s, cast)
+    let (s, cast) = escaping_mean(mesh, rays, receivers, axis, progress, |_| Rgb::ONE);
+    (s.into_iter().map(|x| x.x).collect(), cast)
 }
 
 /// Irradiance from an environment image on every element (zero for an element with no
@@ -92,10 +71,26 @@ pub fn environment_irradiance(
     axis: usize,
     progress: &dyn Progress,
 ) -> (Vec<Rgb>, u64) {
+    let share = std::f64::consts::TAU / (axis.max(1) * axis.max(1)) as f64;
+    let (h, cast) = escaping_mean(mesh, rays, receivers, axis, progress, |dir| env.radiance(dir, share));
+    (h.into_iter().map(|x| x * std::f64::consts::PI).collect(), cast)
+}
+
+/// Per element, the mean of `value(ω)·V(x, ω)` over `axis × axis` cosine-distributed
+/// stratified directions ω, each from its own point of the element's open part
+/// (area-uniform within a random open cell), and the rays cast; 0 for an element with no
+/// open area. Stops early, leaving zeros, when `progress` asks to.
+fn escaping_mean(
+    mesh: &Mesh,
+    rays: &SceneRays,
+    receivers: &Receivers,
+    axis: usize,
+    progress: &dyn Progress,
+    value: impl Fn(DVec3) -> Rgb + Sync,
+) -> (Vec<Rgb>, u64) {
     let axis = axis.max(1);
-    let share = std::f64::consts::TAU / (axis * axis) as f64;
-    let mut h = vec![Rgb::ZERO; mesh.len()];
-    let cast = crate::progress::for_each_chunked(&mut h, "sky exposure", progress, Vec::new, |e, h, dirs| {
+    let mut out = vec![Rgb::ZERO; mesh.len()];
+    let cast = crate::progress::for_each_chunked(&mut out, "sky exposure", progress, Vec::new, |e, out, dirs| {
         let el = &mesh.elements[e];
         if receivers.open_cells.get(e).copied().unwrap_or(u64::MAX) == 0 {
             return 0;
@@ -109,13 +104,13 @@ pub fn environment_irradiance(
             let d = cosine_hemisphere(u1, u2);
             let dir = t * d.x + b * d.y + el.normal * d.z;
             if rays.escapes(p.as_vec3(), dir.as_vec3(), Some(el.patch)) {
-                sum += env.radiance(dir, share);
+                sum += value(dir);
             }
         }
-        *h = sum * (std::f64::consts::PI / dirs.len() as f64);
+        *out = sum / dirs.len() as f64;
         dirs.len() as u64
     });
-    (h, cast)
+    (out, cast)
 }
 
 /// An area-uniform random point of element `e`'s open part.
