@@ -97,9 +97,15 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     let b = solved.solution.display_radiosity();
     let exposure = a.exposure.unwrap_or_else(|| auto_exposure(&solved.scene, &solved.mesh, &b));
     let t = Instant::now();
+    // The scene's camera, else the view `render` frames by default, so that viewers open
+    // the baked file where an image of it would be taken.
+    let camera = solved.scene.camera.unwrap_or_else(|| {
+        let (lo, hi) = solved.scene.bounds();
+        crate::render::default_camera_inside(&solved.scene, radiosity::scene::Camera::framing(lo, hi), 512, 512, None, true)
+    });
     let opts = Options {
         exposure,
-        camera: solved.scene.camera,
+        camera: Some(camera),
         generator: format!("radiosity {}", env!("CARGO_PKG_VERSION")),
     };
     let mut lightmap_line = None;
@@ -140,9 +146,13 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         let (png, intensity) = match mode {
             LightmapMode::Emissive => (radiosity::output::png::encode(&img, Some(exposure))?, 1.0),
             LightmapMode::Moz => {
-                let (png, intensity, clipped) = moz_lightmap_png(&img, exposure)?;
+                let rho_ref = radiosity::output::gltf::moz_reference_reflectance(&solved.scene);
+                let (png, intensity, clipped) = moz_lightmap_png(&img, exposure, rho_ref)?;
                 if clipped > 0 && !a.solve.quiet {
-                    eprintln!("lightmap: {clipped} texels above MOZ_lightmap intensity {intensity:.4e} clipped (the brightest 0.1 %; the EXR keeps them)");
+                    eprintln!(
+                        "lightmap: {clipped} texels above MOZ_lightmap intensity {intensity:.4e} clipped (at most the brightest 0.1 %, \
+                         or light that shows white on surfaces of reflectance {rho_ref:.3} and above; the EXR keeps them)"
+                    );
                 }
                 (png, intensity)
             }

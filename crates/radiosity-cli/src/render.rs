@@ -413,7 +413,7 @@ fn check_image_memory(a: &RenderArgs, spp: usize, gather: bool) -> Result<()> {
 /// The framing default for a scene without a camera looks at it from outside; for a closed
 /// room (every ray from there meets the backs of its one-sided walls) a camera inside the
 /// bounding box, on the same line of sight, is used when it sees more.
-fn default_camera_inside(scene: &Scene, outside: Camera, width: usize, height: usize, fov: Option<f64>, quiet: bool) -> Camera {
+pub(crate) fn default_camera_inside(scene: &Scene, outside: Camera, width: usize, height: usize, fov: Option<f64>, quiet: bool) -> Camera {
     let rays = radiosity::accel::SceneRays::new(&scene.polygons);
     let before = view_coverage(scene, &rays, &outside, width, height, 64);
     if before.problem().is_none() || before.back * 100 < before.total() {

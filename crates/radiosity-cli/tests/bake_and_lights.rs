@@ -74,6 +74,14 @@ fn bake_writes_a_glb_and_refuses_what_it_cannot_write() {
         assert_eq!(code, Some(1), "{args:?}: {err}");
         assert!(err.contains(says), "{args:?}: {err}");
     }
+    // A scene without a camera (an OBJ) gets the view `render` would frame, as a glTF camera.
+    let floor_glb = d.join("floor.glb");
+    let (code, err) = run(&["bake", floor().to_str().unwrap(), "--sky", "1", "-q", "-o", floor_glb.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{err}");
+    let b = std::fs::read(&floor_glb).unwrap();
+    let n = u32::from_le_bytes(b[12..16].try_into().unwrap()) as usize;
+    let doc: serde_json::Value = serde_json::from_slice(&b[20..20 + n]).unwrap();
+    assert_eq!(doc["cameras"].as_array().map(|c| c.len()), Some(1), "no camera in the baked OBJ");
     // An output under a file (not a folder) is refused before any work.
     let under = floor().join("x.glb");
     let (code, err) = run(&["bake", "-o", under.to_str().unwrap()]);

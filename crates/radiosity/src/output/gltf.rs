@@ -160,17 +160,46 @@ pub struct Lightmap<'a> {
     pub intensity: f64,
 }
 
+/// The reflectance below which a tenth of the scene's reflecting area lies (the largest
+/// channel of each polygon's mean reflectance, area-weighted; 0 when nothing reflects):
+/// [`moz_lightmap_png`] clips only irradiance that saturates a display on surfaces at least
+/// this bright.
+pub fn moz_reference_reflectance(scene: &Scene) -> f64 {
+    let mut v: Vec<(f64, f64)> = scene
+        .polygons
+        .iter()
+        .map(|p| (scene.materials[p.material as usize].reflectance.max_element(), p.area))
+        .filter(|(r, a)| *r > 0.0 && *a > 0.0)
+        .collect();
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = v.iter().map(|x| x.1).sum();
+    let mut acc = 0.0;
+    for (r, a) in &v {
+        acc += a;
+        if acc >= 0.1 * total {
+            return *r;
+        }
+    }
+    0.0
+}
+
 /// The `MOZ_lightmap` image of an irradiance lightmap `img` at `exposure`: an 8-bit linear
 /// PNG of `k·E / intensity`, with `intensity` the 99.9th percentile of the texels' largest
-/// channel of `k·E` (texels above it are clipped: their count is returned too).
-pub fn moz_lightmap_png(img: &crate::render::Image, exposure: f64) -> Result<(Vec<u8>, f64, usize)> {
+/// channel of `k·E`, or less: `π / rho_ref`, where a surface of reflectance `rho_ref` (see
+/// [`moz_reference_reflectance`]; 0: no such bound) shows white (`ρ·k·E/π ≥ 1`), so the
+/// 256 levels go to what a display can show — a lamp's hot spot would otherwise leave the
+/// walls a few levels. Texels above are clipped: their count is returned too.
+pub fn moz_lightmap_png(img: &crate::render::Image, exposure: f64, rho_ref: f64) -> Result<(Vec<u8>, f64, usize)> {
     let mut peaks: Vec<f64> = img.pixels.iter().map(|p| p.max_element() * exposure).filter(|x| *x > 0.0 && x.is_finite()).collect();
-    let intensity = if peaks.is_empty() {
+    let mut intensity = if peaks.is_empty() {
         1.0
     } else {
         let k = ((peaks.len() as f64 * 0.999) as usize).min(peaks.len() - 1);
         *peaks.select_nth_unstable_by(k, f64::total_cmp).1
     };
+    if rho_ref > 0.0 && rho_ref.is_finite() {
+        intensity = intensity.min(std::f64::consts::PI / rho_ref);
+    }
     let scale = exposure / intensity;
     let mut clipped = 0;
     let rgb: Vec<u8> = img
