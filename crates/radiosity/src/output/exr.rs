@@ -25,21 +25,13 @@ pub fn encode(img: &RadianceImage) -> Result<Vec<u8>> {
 
 /// Decodes the first RGB(A) layer of an EXR file's bytes; `name` is used in errors.
 pub fn decode(bytes: &[u8], name: &Path) -> Result<RadianceImage> {
-    let img = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .rgba_channels(
-            |res: Vec2<usize>, _| RadianceImage::new(res.width(), res.height()),
-            |img: &mut RadianceImage, pos: Vec2<usize>, (r, g, b, _a): (f32, f32, f32, f32)| {
-                let w = img.width;
-                img.pixels[pos.y() * w + pos.x()] = Rgb::new(r as f64, g as f64, b as f64);
-            },
-        )
-        .first_valid_layer()
-        .all_attributes()
-        .from_buffered(Cursor::new(bytes))
-        .map_err(|e| Error::input(Location::file(name), format!("cannot read EXR: {e}")))?;
-    Ok(img.layer_data.channel_data.pixels)
+    let (w, h, texels) =
+        crate::scene::texture::decode_exr_rgb(bytes).map_err(|e| Error::input(Location::file(name), e))?;
+    let mut img = RadianceImage::new(w, h);
+    for (p, t) in img.pixels.iter_mut().zip(texels) {
+        *p = Rgb::new(t[0] as f64, t[1] as f64, t[2] as f64);
+    }
+    Ok(img)
 }
 
 /// Reads an EXR file.

@@ -96,19 +96,22 @@ pub fn auto_exposure(scene: &Scene, mesh: &Mesh, element_b: &[Rgb]) -> f64 {
     if v.is_empty() {
         v = radiance(true);
     }
-    if v.is_empty() {
-        return 1.0;
-    }
+    weighted_percentile(v, 0.97).map_or(1.0, |l| 0.8 / l)
+}
+
+/// The value below which the fraction `q` of the total weight lies, of (value, weight)
+/// pairs (None for none).
+fn weighted_percentile(mut v: Vec<(f64, f64)>, q: f64) -> Option<f64> {
     v.sort_by(|a, b| a.0.total_cmp(&b.0));
     let total: f64 = v.iter().map(|x| x.1).sum();
     let mut acc = 0.0;
-    for (l, a) in &v {
-        acc += a;
-        if acc >= 0.97 * total {
-            return 0.8 / l;
+    for (x, w) in &v {
+        acc += w;
+        if acc >= q * total {
+            return Some(*x);
         }
     }
-    0.8 / v.last().unwrap().0
+    v.last().map(|x| x.0)
 }
 
 /// How a lightmap is wired into the materials (see the module docs).
@@ -165,22 +168,13 @@ pub struct Lightmap<'a> {
 /// [`moz_lightmap_png`] clips only irradiance that saturates a display on surfaces at least
 /// this bright.
 pub fn moz_reference_reflectance(scene: &Scene) -> f64 {
-    let mut v: Vec<(f64, f64)> = scene
+    let v: Vec<(f64, f64)> = scene
         .polygons
         .iter()
         .map(|p| (scene.materials[p.material as usize].reflectance.max_element(), p.area))
         .filter(|(r, a)| *r > 0.0 && *a > 0.0)
         .collect();
-    v.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let total: f64 = v.iter().map(|x| x.1).sum();
-    let mut acc = 0.0;
-    for (r, a) in &v {
-        acc += a;
-        if acc >= 0.1 * total {
-            return *r;
-        }
-    }
-    0.0
+    weighted_percentile(v, 0.1).unwrap_or(0.0)
 }
 
 /// The `MOZ_lightmap` image of an irradiance lightmap `img` at `exposure`: an 8-bit linear

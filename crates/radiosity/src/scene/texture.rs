@@ -264,6 +264,27 @@ pub struct Texture {
     levels: Vec<Level>,
 }
 
+/// The first RGB(A) layer of an OpenEXR file's bytes: width, height and linear RGB texels,
+/// row-major from the top-left.
+pub fn decode_exr_rgb(bytes: &[u8]) -> Result<(usize, usize, Vec<[f32; 3]>), String> {
+    use exr::prelude::*;
+    let img = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgba_channels(
+            |res: Vec2<usize>, _| (res.width(), res.height(), vec![[0f32; 3]; res.width() * res.height()]),
+            |img: &mut (usize, usize, Vec<[f32; 3]>), pos: Vec2<usize>, (r, g, b, _a): (f32, f32, f32, f32)| {
+                let w = img.0;
+                img.2[pos.y() * w + pos.x()] = [r, g, b];
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(std::io::Cursor::new(bytes))
+        .map_err(|e| format!("cannot read EXR: {e}"))?;
+    Ok(img.layer_data.channel_data.pixels)
+}
+
 /// sRGB-encoded value in [0, 1] to linear (IEC 61966-2-1).
 #[inline]
 pub fn srgb_to_linear(c: f64) -> f64 {
@@ -338,22 +359,7 @@ impl Texture {
     /// Errors for a non-finite or negative texel.
     pub fn decode_environment(name: &str, bytes: &[u8]) -> Result<Texture, String> {
         let (w, h, texels): (usize, usize, Vec<[f32; 3]>) = if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
-            use exr::prelude::*;
-            let img = read()
-                .no_deep_data()
-                .largest_resolution_level()
-                .rgba_channels(
-                    |res: Vec2<usize>, _| (res.width(), res.height(), vec![[0f32; 3]; res.width() * res.height()]),
-                    |img: &mut (usize, usize, Vec<[f32; 3]>), pos: Vec2<usize>, (r, g, b, _a): (f32, f32, f32, f32)| {
-                        let w = img.0;
-                        img.2[pos.y() * w + pos.x()] = [r, g, b];
-                    },
-                )
-                .first_valid_layer()
-                .all_attributes()
-                .from_buffered(std::io::Cursor::new(bytes))
-                .map_err(|e| format!("cannot read EXR: {e}"))?;
-            img.layer_data.channel_data.pixels
+            decode_exr_rgb(bytes)?
         } else if bytes.starts_with(b"#?") {
             let img = image::load_from_memory_with_format(bytes, image::ImageFormat::Hdr)
                 .map_err(|e| format!("cannot read Radiance HDR: {e}"))?
