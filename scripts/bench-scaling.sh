@@ -8,11 +8,12 @@
 # minimum size, the same (the default above 50 000 elements) keep every k in one regime:
 #   EXTRA="--mesh-size 0.3853 --link-min-size 0.3853" scripts/bench-scaling.sh 1 2 4 7 10
 # Needs ../shared beside the repository.
-# Usage: scripts/bench-scaling.sh [K...]   (after cargo build --release; default: 1 2 3 4)
+# Usage: scripts/bench-scaling.sh [K...]   (after cargo build --release; default: 1 2 3 4;
+#        BIN=path/to/radiosity to time another build)
 #        EXTRA="--mesh-size 0.5" scripts/bench-scaling.sh 1 2 4
 set -euo pipefail
 cd "$(dirname "$0")/.."
-BIN=target/release/radiosity
+BIN=${BIN:-target/release/radiosity}
 SRC=$(cd .. && pwd)/shared/scenes/renderpark-classroom/classroom.obj
 [ -f "$SRC" ] || { echo "skipping: ../shared/scenes/renderpark-classroom/classroom.obj not found"; exit 0; }
 KS=("$@")

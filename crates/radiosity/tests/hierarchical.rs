@@ -1275,3 +1275,67 @@ fn radical_inverse(base: u32, mut i: u32) -> f64 {
     }
     r
 }
+
+/// `count` closed unit rooms in a row along x, 0.1 apart (walls facing in, grey 0.5), each
+/// with a small lamp facing down under its ceiling.
+fn rooms_in_a_row(count: usize) -> Scene {
+    let mut d = SceneDesc { name: "rooms".into(), ..Default::default() };
+    d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
+    d.materials.push(MaterialDesc { emission: Rgb::splat(5.0), ..MaterialDesc::diffuse("lamp", Rgb::ZERO) });
+    for r in 0..count {
+        let o = v(1.1 * r as f64, 0.0, 0.0);
+        d.objects.push(ObjectDesc { name: format!("room{r}"), loc: None });
+        for p in box_faces(o, o + DVec3::ONE, true) {
+            d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: p, material: 0, object: 2 * r as u32, loc: None });
+        }
+        d.objects.push(ObjectDesc { name: format!("lamp{r}"), loc: None });
+        let l = |x: f64, z: f64| o + v(x, 0.95, z);
+        let lamp = vec![l(0.4, 0.4), l(0.6, 0.4), l(0.6, 0.6), l(0.4, 0.6)];
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: lamp, material: 1, object: 2 * r as u32 + 1, loc: None });
+    }
+    Scene::from_desc(d).unwrap()
+}
+
+/// Issue 10's scaling: a building's rooms that cannot see each other cost no more together
+/// than apart. Before, every element tested every lamp (direct columns n·m) and every
+/// receiver was paired with the fragments beside each lamp of every room.
+#[test]
+fn closed_rooms_side_by_side_cost_what_they_cost_alone() {
+    let settings = Settings { mesh_size: Some(0.05), ..hierarchical() };
+    let solve = |count: usize| solve_scene(rooms_in_a_row(count), &settings, &NoProgress).unwrap();
+    let (one, four) = (solve(1), solve(4));
+    let stats = |s: &radiosity::pipeline::Solved| s.transport.as_ref().unwrap().hierarchy().unwrap().stats.clone();
+    let (a, b) = (stats(&one), stats(&four));
+    assert!(a.direct_emitters > 0 && b.direct_emitters >= 4 * a.direct_emitters, "{a:?}\n{b:?}");
+    let ratio = |x: u64, y: u64| y as f64 / x.max(1) as f64;
+    eprintln!(
+        "four rooms / one: elements {:.2}, links {:.2}, pairs {:.2}, direct rays {:.2}, direct entries {:.2}",
+        ratio(one.mesh.len() as u64, four.mesh.len() as u64),
+        ratio(a.links, b.links),
+        ratio(a.pairs_examined, b.pairs_examined),
+        ratio(a.direct_rays, b.direct_rays),
+        ratio(a.direct_entries, b.direct_entries)
+    );
+    // Links and the pairs examined grow with the elements, direct entries with the lamps
+    // (measured: links 4.07× for 4.04× the elements, pairs 4.48×, entries 4.79× for 4.75×
+    // the lamp elements).
+    let el = ratio(one.mesh.len() as u64, four.mesh.len() as u64);
+    assert!(ratio(a.links, b.links) <= 1.05 * el && ratio(a.pairs_examined, b.pairs_examined) <= 1.2 * el, "{a:?}\n{b:?}");
+    assert!(ratio(a.direct_entries, b.direct_entries) <= 1.05 * ratio(a.direct_emitters, b.direct_emitters), "{a:?}\n{b:?}");
+    // Each room of the four is lit as the room alone (closed rooms do not see each other).
+    let mean = |s: &radiosity::pipeline::Solved, room: usize| {
+        let (mut p, mut w) = (0.0, 0.0);
+        for (e, b) in s.mesh.elements.iter().zip(&s.solution.radiosity) {
+            if (e.centroid.x / 1.1).floor() as usize == room && s.scene.polygons[e.patch as usize].material == 0 {
+                p += b.y * e.area;
+                w += e.area;
+            }
+        }
+        p / w
+    };
+    let alone = mean(&one, 0);
+    for room in 0..4 {
+        let m = mean(&four, room);
+        assert!((m / alone - 1.0).abs() < 0.01, "room {room}: mean radiosity {m:.5} against {alone:.5} alone");
+    }
+}

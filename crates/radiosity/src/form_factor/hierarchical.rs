@@ -49,8 +49,11 @@
 //!
 //! Emitted light needs no links when the emitting elements are few
 //! ([`Options::direct_columns`]): every element gets point-sampled factors to each of them
-//! (exact cosine, shadow rays), stored as sparse rows beside the links, and emitting nodes
-//! are no sources in the refinement. The links then carry only reflected light, which
+//! it may see (exact cosine, shadow rays; groups of emitters it cannot see — behind it,
+//! facing away, or far with every test ray blocked — are skipped whole by walking a tree
+//! over the emitters, `super::emitter_tree`, so a building's rooms do not test each other's
+//! lamps), stored as sparse rows beside the links, and emitting nodes are no sources in
+//! the refinement. The links then carry only reflected light, which
 //! varies slowly, and the cost of the refinement does not depend on the lights.
 //!
 //! Before the links, every element casts [`Options::closure_rays`] rays over its
@@ -91,6 +94,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::accel::SceneRays;
+use super::emitter_tree::EmitterTree;
 use crate::geom::{self, kernel::point_to_polygon};
 use crate::mesh::{Mesh, Receivers};
 use crate::sampling::{rng_for, stratified, Rng};
@@ -134,8 +138,18 @@ pub const CLOSURE_GROUP: usize = 16;
 /// Default [`Options::closure_rays`].
 pub const DEFAULT_CLOSURE_RAYS: usize = 16;
 
-/// Most emitting elements for [`Options::direct_columns`].
-pub const DIRECT_MAX_EMITTERS: usize = 4096;
+/// Most emitting elements for [`Options::direct_columns`]. Each receiver walks a tree over
+/// them and skips the groups it cannot see (`super::emitter_tree`), so the cost follows the
+/// emitters each element sees, not their number (it was 4 096 when every receiver tested
+/// every emitter: the classroom tiled 7 × 7, 4 704 lamp elements, fell back to linking its
+/// lamps and doubled its links per element).
+pub const DIRECT_MAX_EMITTERS: usize = 65_536;
+
+/// Direct-column entries per element assumed by [`predict_memory`] when the scene has more
+/// emitting elements than this: measured 23 per element on the classroom (96 lamp
+/// elements) and on the same room tiled 4 × 4 (1 536), each element seeing only its room's
+/// lamps. A hall whose every element sees more lamp elements than this is under-predicted.
+pub const PREDICTED_DIRECT_PER_ELEMENT: u64 = 256;
 
 /// Default [`Options::separation`].
 pub const DEFAULT_SEPARATION: f64 = 0.5;
@@ -208,14 +222,18 @@ pub fn link_nodes(tree: &Tree, min_size: f64) -> u64 {
 /// before the coverage test; close enough for a bound) with links refined down to
 /// `min_size` at `separation`: links (36 bytes each while the refinement tasks hold them,
 /// then about 16 stored: source, factor and, where they exist, gradient or direction and a
-/// cluster's reading), the tree and the solver's per-node buffers, and `emitters` direct
-/// columns at most. Checked against the memory limit before the coverage test and links.
+/// cluster's reading), the tree and the solver's per-node buffers, and direct columns to
+/// `emitters` (at most [`PREDICTED_DIRECT_PER_ELEMENT`] per element). Checked against the memory limit before the coverage test and links.
 pub fn predict_memory(tree: &Tree, min_size: f64, separation: f64, emitters: u64) -> u64 {
     let links =
         PREDICTED_LINKS_PER_NODE * (DEFAULT_SEPARATION / separation).powi(2) * link_nodes(tree, min_size) as f64;
     let elements = tree.order.len() as f64;
     let node = std::mem::size_of::<Node>() as f64 + 400.0; // node + pull/push buffers
-    let direct = if emitters as usize <= DIRECT_MAX_EMITTERS { emitters as f64 * elements * 8.0 } else { 0.0 };
+    let direct = if emitters as usize <= DIRECT_MAX_EMITTERS {
+        emitters.min(PREDICTED_DIRECT_PER_ELEMENT) as f64 * elements * 8.0
+    } else {
+        0.0
+    };
     (links * (36.0 + 16.0) + elements * 2.0 * node + direct) as u64
 }
 
@@ -382,11 +400,13 @@ pub fn link(
         min_size: opts.min_size.unwrap_or(0.0),
         reach,
     };
+    let rays_before_direct = total_rays.load(Ordering::Relaxed);
     let direct_rows = match &ctx.direct {
         Some(em) => {
+            let em = EmitterTree::build(mesh, em);
             let rows = per_element(n, "direct light", progress, &stopped, Vec::new(), |i| {
                 let mut c = Counts::default();
-                let row = ctx.direct_row(i, em, &mut c);
+                let row = ctx.direct_row(i, &em, &mut c);
                 total_rays.fetch_add(c.rays, Ordering::Relaxed);
                 row
             })?;
@@ -394,6 +414,7 @@ pub fn link(
         }
         None => None,
     };
+    let direct_rays = total_rays.load(Ordering::Relaxed) - rays_before_direct;
     // Starting receivers: maximal surface nodes, split further so that no task holds more
     // than 1/256 of the elements (work for every thread).
     let max_count = (n / 256).max(64) as u32;
@@ -455,6 +476,7 @@ pub fn link(
         closure_rays: opts.closure_rays as u64,
         min_size: ctx.min_size,
         direct_emitters: ctx.direct.as_ref().map_or(0, |d| d.len() as u64),
+        direct_rays,
         ..Default::default()
     };
     let mut parts = Vec::with_capacity(results.len());
@@ -685,8 +707,10 @@ impl Ctx<'_> {
             }
             if self.direct.is_some() && self.emits_any[s as usize] {
                 // Emitted light goes through the direct columns; only S's parts that emit
-                // nothing are sources here.
-                if !ns.is_leaf() {
+                // nothing are sources here. S is opened to reach them — unless it is well
+                // separated from R and hidden from it (another room of a building, lamps
+                // and all): opening it would pair R with every fragment beside each lamp.
+                if !ns.is_leaf() && !self.hidden(r, s, &mut rng, c) {
                     stack.push((r, ns.child[0]));
                     stack.push((r, ns.child[1]));
                 }
@@ -790,16 +814,35 @@ impl Ctx<'_> {
         }
     }
 
+    /// True when neither of `r`, `s` holds the other, they are well separated and every
+    /// visibility ray between them is blocked.
+    fn hidden(&self, r: u32, s: u32, rng: &mut Rng, c: &mut Counts) -> bool {
+        if self.tree.contains(s, r) || self.tree.contains(r, s) {
+            return false;
+        }
+        if separation_ratio(self.node(r), self.node(s)) >= self.opts.separation {
+            return false;
+        }
+        let near = self.near(r, s);
+        let (v, partial) = self.visibility(r, s, false, near, rng, c);
+        v == 0.0 && !partial
+    }
+
     /// Element `i`'s factors to the emitting elements `em` (ascending), point-sampled with
     /// visibility ([`Ctx::leaf_factor`]); pairs behind each other's plane are skipped.
-    fn direct_row(&self, i: u32, em: &[u32], c: &mut Counts) -> Vec<(u32, f32)> {
+    fn direct_row(&self, i: u32, em: &EmitterTree, c: &mut Counts) -> Vec<(u32, f32)> {
         let mesh = self.mesh;
         let mut rng = rng_for(self.ff.seed ^ 0x4449_5245, i as u64);
+        // The groups' culling draws from its own stream: where nothing is culled the
+        // factors are those of testing every emitter.
+        let mut cull_rng = rng_for(self.ff.seed ^ 0x4355_4c4c, i as u64);
+        let (mut stack, mut candidates) = (Vec::new(), Vec::new());
+        c.rays += em.visible_from(mesh, self.rays, self.receivers, i, self.eps, &mut cull_rng, &mut stack, &mut candidates);
         let mut sc = Scratch::default();
         let ei = &mesh.elements[i as usize];
         let (ci, ni) = ei.corners(&mesh.positions);
         let mut row = Vec::new();
-        for &j in em {
+        for &j in &candidates {
             if j == i {
                 continue;
             }

@@ -32,6 +32,7 @@
 pub mod adaptive;
 pub mod analytic;
 pub mod diagnostics;
+mod emitter_tree;
 pub mod enclosure;
 pub mod hemicube;
 pub mod hierarchical;

@@ -551,6 +551,9 @@ pub struct HierarchyStats {
     pub direct_emitters: u64,
     /// Non-zero factors to them.
     pub direct_entries: u64,
+    /// Rays the direct columns cast (shadow rays and the culling of hidden emitter
+    /// groups, [`crate::form_factor::hierarchical`]).
+    pub direct_rays: u64,
     /// The minimum node size links were refined to (scene units; 0: the elements).
     pub min_size: f64,
     /// Nodes that links can reach at that size (the root and every child of a node
