@@ -138,6 +138,10 @@ pub const CLOSURE_GROUP: usize = 16;
 /// Default [`Options::closure_rays`].
 pub const DEFAULT_CLOSURE_RAYS: usize = 16;
 
+/// Elements per receiver group whose hidden emitters are culled together before each
+/// element's own walk (see `super::emitter_tree`).
+const RECEIVER_GROUP: usize = 64;
+
 /// Most emitting elements for [`Options::direct_columns`]. Each receiver walks a tree over
 /// them and skips the groups it cannot see (`super::emitter_tree`), so the cost follows the
 /// emitters each element sees, not their number (it was 4 096 when every receiver tested
@@ -404,9 +408,41 @@ pub fn link(
     let direct_rows = match &ctx.direct {
         Some(em) => {
             let em = EmitterTree::build(mesh, em);
+            // Groups of receivers (nodes of the element tree with at most RECEIVER_GROUP
+            // elements) cull first what none of their elements can see: the lamps of
+            // other rooms once per group instead of once per element.
+            let mut groups = Vec::new();
+            let mut stack = if nodes.is_empty() { Vec::new() } else { vec![0u32] };
+            while let Some(k) = stack.pop() {
+                let nd = &nodes[k as usize];
+                if nd.count as usize <= RECEIVER_GROUP || nd.is_leaf() {
+                    groups.push(k);
+                } else {
+                    stack.extend(nd.child);
+                }
+            }
+            let starts: Vec<Vec<u32>> = groups
+                .par_iter()
+                .map(|&k| {
+                    let nd = &nodes[k as usize];
+                    let elements = &tree.order[nd.first as usize..(nd.first + nd.count) as usize];
+                    let mut rng = rng_for(ctx.ff.seed ^ 0x4752_4f55, k as u64);
+                    let mut out = Vec::new();
+                    let cast = em.for_group(mesh, ctx.rays, ctx.receivers, elements, ctx.eps, &mut rng, &mut out);
+                    total_rays.fetch_add(cast, Ordering::Relaxed);
+                    out
+                })
+                .collect();
+            let mut group_of = vec![0u32; n];
+            for (g, &k) in groups.iter().enumerate() {
+                let nd = &nodes[k as usize];
+                for slot in nd.first..nd.first + nd.count {
+                    group_of[tree.order[slot as usize] as usize] = g as u32;
+                }
+            }
             let rows = per_element(n, "direct light", progress, &stopped, Vec::new(), |i| {
                 let mut c = Counts::default();
-                let row = ctx.direct_row(i, &em, &mut c);
+                let row = ctx.direct_row(i, &em, &starts[group_of[i as usize] as usize], &mut c);
                 total_rays.fetch_add(c.rays, Ordering::Relaxed);
                 row
             })?;
@@ -830,14 +866,14 @@ impl Ctx<'_> {
 
     /// Element `i`'s factors to the emitting elements `em` (ascending), point-sampled with
     /// visibility ([`Ctx::leaf_factor`]); pairs behind each other's plane are skipped.
-    fn direct_row(&self, i: u32, em: &EmitterTree, c: &mut Counts) -> Vec<(u32, f32)> {
+    fn direct_row(&self, i: u32, em: &EmitterTree, start: &[u32], c: &mut Counts) -> Vec<(u32, f32)> {
         let mesh = self.mesh;
         let mut rng = rng_for(self.ff.seed ^ 0x4449_5245, i as u64);
         // The groups' culling draws from its own stream: where nothing is culled the
         // factors are those of testing every emitter.
         let mut cull_rng = rng_for(self.ff.seed ^ 0x4355_4c4c, i as u64);
         let (mut stack, mut candidates) = (Vec::new(), Vec::new());
-        c.rays += em.visible_from(mesh, self.rays, self.receivers, i, self.eps, &mut cull_rng, &mut stack, &mut candidates);
+        c.rays += em.visible_from(mesh, self.rays, self.receivers, i, start, self.eps, &mut cull_rng, &mut stack, &mut candidates);
         let mut sc = Scratch::default();
         let ei = &mesh.elements[i as usize];
         let (ci, ni) = ei.corners(&mesh.positions);
