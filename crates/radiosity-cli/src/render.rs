@@ -14,7 +14,7 @@ use radiosity::output;
 use radiosity::pipeline::{render_radiosity, solve_scene, solve_scene_observed};
 use radiosity::render::gather;
 use radiosity::render::gouraud::{self, ElementTracer, Shading};
-use radiosity::render::{view_coverage, Image};
+use radiosity::render::{lit_coverage, view_coverage, Image};
 use radiosity::report::ViewReport;
 use radiosity::scene::{Camera, Scene};
 use radiosity::solve::{IterationState, StopReason};
@@ -184,9 +184,13 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     outputs(&a, &out_png, view_list.is_some(), &names).check()?;
     let mut warnings = Vec::new();
     // The views: one (file, flags, the scene's own camera, or a framing default) or a list.
-    let views: Vec<(String, Camera, PathBuf, Option<PathBuf>)> = match view_list {
+    let framed = view_list.is_none()
+        && file_camera.is_none()
+        && scene.camera.is_none()
+        && a.eye.is_none()
+        && a.look_at.is_none();
+    let mut views: Vec<(String, Camera, PathBuf, Option<PathBuf>)> = match view_list {
         None => {
-            let framed = file_camera.is_none() && scene.camera.is_none() && a.eye.is_none() && a.look_at.is_none();
             let mut cam = file_camera.or(scene.camera).unwrap_or_else(|| {
                 let (lo, hi) = scene.bounds();
                 Camera::framing(lo, hi)
@@ -225,15 +229,17 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     };
     // A camera that sees nothing, or only the backs of one-sided surfaces, draws a black
     // image: said now, before the solve.
+    let mut warned = vec![false; views.len()];
     {
         let rays = radiosity::accel::SceneRays::new(&scene.polygons);
-        for (name, cam, _, _) in &views {
+        for (k, (name, cam, _, _)) in views.iter().enumerate() {
             let cov = view_coverage(&scene, &rays, cam, a.width, a.height, 64);
             // Under a sky, a view of the sky alone is not black.
             if scene.lit_sky().is_some() && cov.back * 100 < cov.total().max(1) {
                 continue;
             }
             if let Some(why) = cov.problem() {
+                warned[k] = true;
                 let p = cam.position;
                 let w = format!("view '{name}': the camera at ({}, {}, {}) {why}", p.x, p.y, p.z);
                 eprintln!("warning: {w}");
@@ -278,13 +284,60 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     }
 
     let t = Instant::now();
+    let mut report_warnings = Vec::new();
     let tracer =
         tracer_cell.into_inner().unwrap_or_else(|| ElementTracer::new(&solved.mesh, &two_sided_of(&solved.scene)));
+    // A camera that sees surfaces, but none of them lit (outside a closed two-sided room),
+    // draws a black image too: known only now. The default camera then tries the inside.
+    if solved.scene.lit_sky().is_none() {
+        let b = solved.solution.display_radiosity();
+        let lit = |cam: &Camera| lit_coverage(&solved.mesh, &tracer, &b, cam, a.width, a.height, 64);
+        for (k, (name, cam, _, _)) in views.iter_mut().enumerate() {
+            let (seen, total) = lit(cam);
+            // The default camera shows lit surfaces in under a quarter of the image: an
+            // inside camera that shows at least twice as many is taken.
+            if framed && a.frames.is_none() && seen * 4 < total {
+                if let Some(inside) = inside_camera(&solved.scene, cam, a.fov).filter(|c| lit(c).0 >= 2 * seen.max(1)) {
+                    if !a.solve.quiet {
+                        let (o, p) = (cam.position, inside.position);
+                        eprintln!(
+                            "note: the default camera, outside at ({:.4}, {:.4}, {:.4}), sees lit surfaces in {:.1} % of the \
+                             image; using a camera inside at ({:.4}, {:.4}, {:.4}) (--eye/--look-at or --camera choose another)",
+                            o.x,
+                            o.y,
+                            o.z,
+                            100.0 * seen as f64 / total as f64,
+                            p.x,
+                            p.y,
+                            p.z
+                        );
+                    }
+                    *cam = inside;
+                    continue;
+                }
+            }
+            if warned[k] || seen * 100 >= total {
+                continue;
+            }
+            let p = cam.position;
+            let w = format!(
+                "view '{name}': the camera at ({}, {}, {}) sees lit surfaces in only {:.1} % of the image: the image is \
+                 nearly black (is it outside a closed room?); use --camera or --eye/--look-at",
+                p.x,
+                p.y,
+                p.z,
+                100.0 * seen as f64 / total as f64
+            );
+            eprintln!("warning: {w}");
+            report_warnings.push(w);
+        }
+    }
     let gather_rays = a.gather_rays.unwrap_or_else(|| solved.default_gather_axis());
     let indirect = if gather { Some(solved.indirect(gather_rays > 0)) } else { None };
     let mut report = solved.report();
     report.timings.load = load_s;
     report.warnings.extend(warnings);
+    report.warnings.extend(report_warnings);
     // After an interrupt during the solve the images are still drawn from the solution so
     // far (a second Ctrl-C aborts); a first Ctrl-C after the solve (while rendering) stops
     // rendering: the view being drawn and those after it are not written, the views done
@@ -419,20 +472,7 @@ pub(crate) fn default_camera_inside(scene: &Scene, outside: Camera, width: usize
     if before.problem().is_none() || before.back * 100 < before.total() {
         return outside;
     }
-    let (lo, hi) = scene.bounds();
-    let centre = 0.5 * (lo + hi);
-    let half = 0.5 * (hi - lo);
-    let dir = (outside.look_at - outside.position).normalize();
-    // Distance from the centre to the box along the line of sight, backwards.
-    let t = (0..3).filter(|&i| dir[i].abs() > 1e-12).map(|i| half[i] / dir[i].abs()).fold(f64::INFINITY, f64::min);
-    if !t.is_finite() {
-        return outside;
-    }
-    let vfov_deg = fov.unwrap_or(60.0);
-    let inside = Camera { position: centre - dir * (0.8 * t), look_at: centre + dir * t, up: outside.up, vfov_deg };
-    if inside.validate().is_err() {
-        return outside;
-    }
+    let Some(inside) = inside_camera(scene, &outside, fov) else { return outside };
     let after = view_coverage(scene, &rays, &inside, width, height, 64);
     if after.front <= before.front {
         return outside;
@@ -446,6 +486,23 @@ pub(crate) fn default_camera_inside(scene: &Scene, outside: Camera, width: usize
         );
     }
     inside
+}
+
+/// A camera inside the scene's bounding box on the line of sight of `outside` (from 0.8 of
+/// the way from the centre to the box, backwards, towards the centre).
+fn inside_camera(scene: &Scene, outside: &Camera, fov: Option<f64>) -> Option<Camera> {
+    let (lo, hi) = scene.bounds();
+    let centre = 0.5 * (lo + hi);
+    let half = 0.5 * (hi - lo);
+    let dir = (outside.look_at - outside.position).normalize();
+    // Distance from the centre to the box along the line of sight, backwards.
+    let t = (0..3).filter(|&i| dir[i].abs() > 1e-12).map(|i| half[i] / dir[i].abs()).fold(f64::INFINITY, f64::min);
+    if !t.is_finite() {
+        return None;
+    }
+    let vfov_deg = fov.unwrap_or(60.0);
+    let inside = Camera { position: centre - dir * (0.8 * t), look_at: centre + dir * t, up: outside.up, vfov_deg };
+    inside.validate().ok().map(|_| inside)
 }
 
 /// `dir/stem.ext` → `dir/stem_name.ext`.

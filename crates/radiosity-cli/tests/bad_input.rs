@@ -422,6 +422,44 @@ fn default_camera_of_a_closed_room_is_placed_inside() {
     assert_eq!(lit, 16 * 16, "the room fills the image from inside");
 }
 
+/// A closed unit room of grey walls (inward) lit by a lamp under its ceiling, facing down.
+fn lamp_room(d: &Path) -> PathBuf {
+    std::fs::write(d.join("lamp-room.mtl"), "newmtl wall\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n").unwrap();
+    let mut obj = String::from("mtllib lamp-room.mtl\nusemtl wall\n");
+    for (x, y, z) in [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)] {
+        obj.push_str(&format!("v {x} {y} {z}\n"));
+    }
+    for f in ["1 2 3 4", "5 8 7 6", "1 5 6 2", "4 3 7 8", "1 4 8 5", "2 6 7 3"] {
+        obj.push_str(&format!("f {f}\n"));
+    }
+    obj.push_str("v 0.4 0.95 0.4\nv 0.6 0.95 0.4\nv 0.6 0.95 0.6\nv 0.4 0.95 0.6\nusemtl lamp\nf 9 10 11 12\n");
+    let p = d.join("lamp-room.obj");
+    std::fs::write(&p, obj).unwrap();
+    p
+}
+
+/// Issue 9: with `--two-sided` the default camera, outside the room, saw only the unlit
+/// outsides of the walls — a black image without a word. The camera is now moved inside
+/// (the backs-of-one-sided-walls check could not see this: the walls are fronts); an
+/// explicit camera there is warned about.
+#[test]
+fn default_camera_outside_a_two_sided_room_moves_inside_and_an_explicit_one_is_warned() {
+    let d = case_dir("lamp-room");
+    let room = lamp_room(&d);
+    let base = ["render", room.to_str().unwrap(), "--two-sided", "--mesh-size", "0.25", "--width", "16", "--height", "16", "--render", "gouraud", "-o", "x.png", "--exr", "x.exr"];
+    let (code, err, _) = run_in(&d, &base);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("sees lit surfaces in 0.0 % of the image; using a camera inside"), "{err}");
+    assert!(!err.contains("warning: view"), "{err}");
+    let img = radiosity::output::exr::read(&d.join("x.exr")).unwrap();
+    let lit = img.pixels.iter().filter(|p| p.x > 0.0).count();
+    assert_eq!(lit, 16 * 16, "the room fills the image from inside");
+    let (code, err, _) = run_in(&d, &[&base[..], &["--eye", "0.5,0.5,-2", "--look-at", "0.5,0.5,0.5"]].concat());
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("warning: view 'main': the camera at (0.5, 0.5, -2) sees lit surfaces in only 0.0 % of the image"), "{err}");
+    assert!(!err.contains("using a camera inside"), "{err}");
+}
+
 // ---------------------------------------------------------------- hostile-input audit
 
 #[test]

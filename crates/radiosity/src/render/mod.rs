@@ -129,6 +129,45 @@ pub fn view_coverage(
     c
 }
 
+/// After a solve: of `n × n` rays through the image of `camera` (as [`view_coverage`]),
+/// how many meet an element whose radiosity (luminance) is above 1e-3 of the area-weighted
+/// mean — a *lit* surface — and how many were cast. A camera outside a closed two-sided
+/// room sees only fronts, all unlit: [`view_coverage`] finds nothing wrong, the image is
+/// black all the same.
+pub fn lit_coverage(
+    mesh: &crate::mesh::Mesh,
+    tracer: &gouraud::ElementTracer,
+    radiosity: &[Rgb],
+    camera: &crate::scene::Camera,
+    width: usize,
+    height: usize,
+    n: usize,
+) -> (usize, usize) {
+    let (w, h) = (width.max(1), height.max(1));
+    let cam = PinholeCamera::new(camera, w, h);
+    let n = n.max(1);
+    let (mut sum, mut area) = (0.0, 0.0);
+    for (e, b) in mesh.elements.iter().zip(radiosity) {
+        sum += e.area * crate::luminance(*b);
+        area += e.area;
+    }
+    let threshold = 1e-3 * sum / area.max(f64::MIN_POSITIVE);
+    let mut lit = 0;
+    for j in 0..n {
+        for i in 0..n {
+            let x = (i as f64 + 0.5) / n as f64 * w as f64;
+            let y = (j as f64 + 0.5) / n as f64 * h as f64;
+            if let Some((e, _)) = tracer.trace(cam.eye, cam.direction(x, y)) {
+                let front = mesh.elements[e as usize].normal.dot(cam.direction(x, y)) < 0.0;
+                if front && radiosity.get(e as usize).is_some_and(|b| crate::luminance(*b) > threshold) {
+                    lit += 1;
+                }
+            }
+        }
+    }
+    (lit, n * n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
