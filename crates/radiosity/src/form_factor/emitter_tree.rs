@@ -143,10 +143,8 @@ impl EmitterTree {
         let (ci, ni) = ei.corners(&mesh.positions);
         let (lo, hi) = ci[..ni].iter().fold((ei.centroid, ei.centroid), |(l, h), p| (l.min(*p), h.max(*p)));
         let group = Group { lo, hi, size: ei.area.sqrt(), plane: Some((ei.normal, ei.normal.dot(ei.centroid))), many: false };
-        let cast = self.walk(mesh, rays, &group, start, eps, rng, stack, |s, rng| {
-            let _ = rng;
-            Some((pts[s % pts.len()], ei.normal, ei.patch))
-        }, |k| out.extend_from_slice(self.leaf_items(k)));
+        let sample = |s: usize, _: &mut Rng| Some((pts[s % pts.len()], ei.normal, ei.patch));
+        let cast = self.walk(mesh, rays, &group, start, eps, rng, stack, sample, |k| out.extend_from_slice(self.leaf_items(k)));
         out.sort_unstable();
         cast
     }

@@ -227,7 +227,8 @@ pub fn link_nodes(tree: &Tree, min_size: f64) -> u64 {
 /// `min_size` at `separation`: links (36 bytes each while the refinement tasks hold them,
 /// then about 16 stored: source, factor and, where they exist, gradient or direction and a
 /// cluster's reading), the tree and the solver's per-node buffers, and direct columns to
-/// `emitters` (at most [`PREDICTED_DIRECT_PER_ELEMENT`] per element). Checked against the memory limit before the coverage test and links.
+/// `emitters` (at most [`PREDICTED_DIRECT_PER_ELEMENT`] per element). Checked against the
+/// memory limit before the coverage test and links.
 pub fn predict_memory(tree: &Tree, min_size: f64, separation: f64, emitters: u64) -> u64 {
     let links =
         PREDICTED_LINKS_PER_NODE * (DEFAULT_SEPARATION / separation).powi(2) * link_nodes(tree, min_size) as f64;
@@ -406,48 +407,7 @@ pub fn link(
     };
     let rays_before_direct = total_rays.load(Ordering::Relaxed);
     let direct_rows = match &ctx.direct {
-        Some(em) => {
-            let em = EmitterTree::build(mesh, em);
-            // Groups of receivers (nodes of the element tree with at most RECEIVER_GROUP
-            // elements) cull first what none of their elements can see: the lamps of
-            // other rooms once per group instead of once per element.
-            let mut groups = Vec::new();
-            let mut stack = if nodes.is_empty() { Vec::new() } else { vec![0u32] };
-            while let Some(k) = stack.pop() {
-                let nd = &nodes[k as usize];
-                if nd.count as usize <= RECEIVER_GROUP || nd.is_leaf() {
-                    groups.push(k);
-                } else {
-                    stack.extend(nd.child);
-                }
-            }
-            let starts: Vec<Vec<u32>> = groups
-                .par_iter()
-                .map(|&k| {
-                    let nd = &nodes[k as usize];
-                    let elements = &tree.order[nd.first as usize..(nd.first + nd.count) as usize];
-                    let mut rng = rng_for(ctx.ff.seed ^ 0x4752_4f55, k as u64);
-                    let mut out = Vec::new();
-                    let cast = em.for_group(mesh, ctx.rays, ctx.receivers, elements, ctx.eps, &mut rng, &mut out);
-                    total_rays.fetch_add(cast, Ordering::Relaxed);
-                    out
-                })
-                .collect();
-            let mut group_of = vec![0u32; n];
-            for (g, &k) in groups.iter().enumerate() {
-                let nd = &nodes[k as usize];
-                for slot in nd.first..nd.first + nd.count {
-                    group_of[tree.order[slot as usize] as usize] = g as u32;
-                }
-            }
-            let rows = per_element(n, "direct light", progress, &stopped, Vec::new(), |i| {
-                let mut c = Counts::default();
-                let row = ctx.direct_row(i, &em, &starts[group_of[i as usize] as usize], &mut c);
-                total_rays.fetch_add(c.rays, Ordering::Relaxed);
-                row
-            })?;
-            Some(crate::transport::SparseRows::from_rows(rows))
-        }
+        Some(em) => Some(ctx.direct_columns(em, progress, &stopped, &total_rays)?),
         None => None,
     };
     let direct_rays = total_rays.load(Ordering::Relaxed) - rays_before_direct;
@@ -864,8 +824,62 @@ impl Ctx<'_> {
         v == 0.0 && !partial
     }
 
-    /// Element `i`'s factors to the emitting elements `em` (ascending), point-sampled with
-    /// visibility ([`Ctx::leaf_factor`]); pairs behind each other's plane are skipped.
+    /// The direct columns: every element's factors to the emitting elements `em` it may
+    /// see ([`Ctx::direct_row`]). Groups of receivers (nodes of the element tree with at
+    /// most [`RECEIVER_GROUP`] elements) first cull what none of their elements can see —
+    /// the lamps of other rooms once per group instead of once per element — and each
+    /// element's walk starts from what its group left.
+    fn direct_columns(
+        &self,
+        em: &[u32],
+        progress: &dyn Progress,
+        stopped: &AtomicBool,
+        total_rays: &AtomicU64,
+    ) -> Result<crate::transport::SparseRows> {
+        let (mesh, tree, n) = (self.mesh, self.tree, self.mesh.len());
+        let nodes = &tree.nodes;
+        let em = EmitterTree::build(mesh, em);
+        let mut groups = Vec::new();
+        let mut stack = if nodes.is_empty() { Vec::new() } else { vec![0u32] };
+        while let Some(k) = stack.pop() {
+            let nd = &nodes[k as usize];
+            if nd.count as usize <= RECEIVER_GROUP || nd.is_leaf() {
+                groups.push(k);
+            } else {
+                stack.extend(nd.child);
+            }
+        }
+        let starts: Vec<Vec<u32>> = groups
+            .par_iter()
+            .map(|&k| {
+                let nd = &nodes[k as usize];
+                let elements = &tree.order[nd.first as usize..(nd.first + nd.count) as usize];
+                let mut rng = rng_for(self.ff.seed ^ 0x4752_4f55, k as u64);
+                let mut out = Vec::new();
+                let cast = em.for_group(mesh, self.rays, self.receivers, elements, self.eps, &mut rng, &mut out);
+                total_rays.fetch_add(cast, Ordering::Relaxed);
+                out
+            })
+            .collect();
+        let mut group_of = vec![0u32; n];
+        for (g, &k) in groups.iter().enumerate() {
+            let nd = &nodes[k as usize];
+            for &e in &tree.order[nd.first as usize..(nd.first + nd.count) as usize] {
+                group_of[e as usize] = g as u32;
+            }
+        }
+        let rows = per_element(n, "direct light", progress, stopped, Vec::new(), |i| {
+            let mut c = Counts::default();
+            let row = self.direct_row(i, &em, &starts[group_of[i as usize] as usize], &mut c);
+            total_rays.fetch_add(c.rays, Ordering::Relaxed);
+            row
+        })?;
+        Ok(crate::transport::SparseRows::from_rows(rows))
+    }
+
+    /// Element `i`'s factors to the emitting elements it may see (`em` walked from the
+    /// nodes `start`, ascending), point-sampled with visibility ([`Ctx::leaf_factor`]);
+    /// pairs behind each other's plane are skipped.
     fn direct_row(&self, i: u32, em: &EmitterTree, start: &[u32], c: &mut Counts) -> Vec<(u32, f32)> {
         let mesh = self.mesh;
         let mut rng = rng_for(self.ff.seed ^ 0x4449_5245, i as u64);

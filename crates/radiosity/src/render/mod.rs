@@ -104,29 +104,35 @@ pub fn view_coverage(
     height: usize,
     n: usize,
 ) -> ViewCoverage {
-    let (w, h) = (width.max(1), height.max(1));
-    let cam = PinholeCamera::new(camera, w, h);
-    let n = n.max(1);
     let mut c = ViewCoverage::default();
-    for j in 0..n {
-        for i in 0..n {
-            let x = (i as f64 + 0.5) / n as f64 * w as f64;
-            let y = (j as f64 + 0.5) / n as f64 * h as f64;
-            let dir = cam.direction(x, y);
-            match rays.closest_facing(cam.eye.as_vec3(), dir.as_vec3(), f32::INFINITY, None) {
-                None => c.background += 1,
-                Some((_, p)) => {
-                    let poly = &scene.polygons[p as usize];
-                    if !poly.two_sided && poly.normal.dot(dir) >= 0.0 {
-                        c.back += 1;
-                    } else {
-                        c.front += 1;
-                    }
+    for (eye, dir) in probes(camera, width, height, n) {
+        match rays.closest_facing(eye.as_vec3(), dir.as_vec3(), f32::INFINITY, None) {
+            None => c.background += 1,
+            Some((_, p)) => {
+                let poly = &scene.polygons[p as usize];
+                if !poly.two_sided && poly.normal.dot(dir) >= 0.0 {
+                    c.back += 1;
+                } else {
+                    c.front += 1;
                 }
             }
         }
     }
     c
+}
+
+/// The eye and the directions through the pixel centres of an `n × n` image of the same
+/// aspect as `width × height`: the probes of [`view_coverage`] and [`lit_coverage`].
+fn probes(camera: &crate::scene::Camera, width: usize, height: usize, n: usize) -> impl Iterator<Item = (glam::DVec3, glam::DVec3)> {
+    let (w, h) = (width.max(1) as f64, height.max(1) as f64);
+    let cam = PinholeCamera::new(camera, width.max(1), height.max(1));
+    let n = n.max(1);
+    (0..n * n).map(move |k| {
+        let (i, j) = (k % n, k / n);
+        let x = (i as f64 + 0.5) / n as f64 * w;
+        let y = (j as f64 + 0.5) / n as f64 * h;
+        (cam.eye, cam.direction(x, y))
+    })
 }
 
 /// After a solve: of `n × n` rays through the image of `camera` (as [`view_coverage`]),
@@ -143,29 +149,21 @@ pub fn lit_coverage(
     height: usize,
     n: usize,
 ) -> (usize, usize) {
-    let (w, h) = (width.max(1), height.max(1));
-    let cam = PinholeCamera::new(camera, w, h);
-    let n = n.max(1);
     let (mut sum, mut area) = (0.0, 0.0);
     for (e, b) in mesh.elements.iter().zip(radiosity) {
         sum += e.area * crate::luminance(*b);
         area += e.area;
     }
     let threshold = 1e-3 * sum / area.max(f64::MIN_POSITIVE);
-    let mut lit = 0;
-    for j in 0..n {
-        for i in 0..n {
-            let x = (i as f64 + 0.5) / n as f64 * w as f64;
-            let y = (j as f64 + 0.5) / n as f64 * h as f64;
-            if let Some((e, _)) = tracer.trace(cam.eye, cam.direction(x, y)) {
-                let front = mesh.elements[e as usize].normal.dot(cam.direction(x, y)) < 0.0;
-                if front && radiosity.get(e as usize).is_some_and(|b| crate::luminance(*b) > threshold) {
-                    lit += 1;
-                }
-            }
-        }
-    }
-    (lit, n * n)
+    let lit = probes(camera, width, height, n)
+        .filter(|&(eye, dir)| {
+            tracer.trace(eye, dir).is_some_and(|(e, _)| {
+                mesh.elements[e as usize].normal.dot(dir) < 0.0
+                    && radiosity.get(e as usize).is_some_and(|b| crate::luminance(*b) > threshold)
+            })
+        })
+        .count();
+    (lit, n.max(1) * n.max(1))
 }
 
 #[cfg(test)]
