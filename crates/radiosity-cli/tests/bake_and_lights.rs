@@ -3,8 +3,11 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn dir() -> PathBuf {
-    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli-bake-lights");
+/// A folder of its own for each test: the tests run in parallel, and a shared `floor.obj`
+/// rewritten by one test was read half-written by another (CI: "usemtl 'grey': no such
+/// material").
+fn dir(test: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli-bake-lights").join(test);
     std::fs::create_dir_all(&d).unwrap();
     d
 }
@@ -15,8 +18,7 @@ fn run(args: &[&str]) -> (Option<i32>, String) {
 }
 
 /// A 4 × 4 grey floor (ρ = 0.5) facing up, and nothing else.
-fn floor() -> PathBuf {
-    let d = dir();
+fn floor(d: &Path) -> PathBuf {
     std::fs::write(d.join("floor.mtl"), "newmtl grey\nKd 0.5 0.5 0.5\n").unwrap();
     let p = d.join("floor.obj");
     std::fs::write(&p, "mtllib floor.mtl\nusemtl grey\no floor\nv -2 0 -2\nv -2 0 2\nv 2 0 2\nv 2 0 -2\nf 1 2 3 4\n").unwrap();
@@ -30,8 +32,9 @@ fn floor_radiance(report: &Path) -> f64 {
 
 #[test]
 fn sun_flag_lights_a_floor_by_its_cosine() {
-    let f = floor();
-    let report = dir().join("sun.json");
+    let d = dir("sun");
+    let f = floor(&d);
+    let report = d.join("sun.json");
     // Towards the sun at 60° from the zenith: E cos 60° = 50 on the floor, L = ρ E cos/π.
     let t = 60f64.to_radians();
     let sun = format!("{},{},0,100", t.sin(), t.cos());
@@ -58,7 +61,7 @@ fn sun_flag_lights_a_floor_by_its_cosine() {
 
 #[test]
 fn bake_writes_a_glb_and_refuses_what_it_cannot_write() {
-    let d = dir();
+    let d = dir("bake");
     let glb = d.join("cornell.glb");
     let (code, err) = run(&["bake", "-o", glb.to_str().unwrap(), "--mesh-size", "100", "--exposure", "2"]);
     assert_eq!(code, Some(0), "{err}");
@@ -76,14 +79,14 @@ fn bake_writes_a_glb_and_refuses_what_it_cannot_write() {
     }
     // A scene without a camera (an OBJ) gets the view `render` would frame, as a glTF camera.
     let floor_glb = d.join("floor.glb");
-    let (code, err) = run(&["bake", floor().to_str().unwrap(), "--sky", "1", "-q", "-o", floor_glb.to_str().unwrap()]);
+    let (code, err) = run(&["bake", floor(&d).to_str().unwrap(), "--sky", "1", "-q", "-o", floor_glb.to_str().unwrap()]);
     assert_eq!(code, Some(0), "{err}");
     let b = std::fs::read(&floor_glb).unwrap();
     let n = u32::from_le_bytes(b[12..16].try_into().unwrap()) as usize;
     let doc: serde_json::Value = serde_json::from_slice(&b[20..20 + n]).unwrap();
     assert_eq!(doc["cameras"].as_array().map(|c| c.len()), Some(1), "no camera in the baked OBJ");
     // An output under a file (not a folder) is refused before any work.
-    let under = floor().join("x.glb");
+    let under = floor(&d).join("x.glb");
     let (code, err) = run(&["bake", "-o", under.to_str().unwrap()]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("is not a folder") && !err.contains("iteration"), "{err}");
@@ -94,12 +97,13 @@ fn bake_writes_a_glb_and_refuses_what_it_cannot_write() {
 /// or exclude one are refused before any work.
 #[test]
 fn sky_image_flag_lights_a_floor_and_refuses_conflicts() {
-    let f = floor();
+    let d = dir("sky-image");
+    let f = floor(&d);
     let mut img = radiosity::render::Image::new(16, 8);
     img.pixels.iter_mut().for_each(|p| *p = radiosity::Rgb::splat(0.5));
-    let exr = dir().join("const.exr");
+    let exr = d.join("const.exr");
     std::fs::write(&exr, radiosity::output::exr::encode(&img).unwrap()).unwrap();
-    let report = dir().join("image.json");
+    let report = d.join("image.json");
     let (code, err) = run(&[
         "solve",
         f.to_str().unwrap(),

@@ -14,8 +14,13 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn write(name: &str, text: &str) -> PathBuf {
+    // Written beside and renamed into place: tests run in parallel and several write the same
+    // shared file (`good.mtl`), which a plain rewrite leaves empty for a moment under another
+    // test's reader.
     let p = tmp(name);
-    std::fs::write(&p, text).unwrap();
+    let part = tmp(&format!("{name}.{:?}.part", std::thread::current().id()));
+    std::fs::write(&part, text).unwrap();
+    std::fs::rename(&part, &p).unwrap();
     p
 }
 
