@@ -1339,3 +1339,35 @@ fn closed_rooms_side_by_side_cost_what_they_cost_alone() {
         assert!((m / alone - 1.0).abs() < 0.01, "room {room}: mean radiosity {m:.5} against {alone:.5} alone");
     }
 }
+
+/// A corridor 4 × 1 × 1 open at one end (inward faces, ρ = 0.5, Ke = 1 everywhere): most
+/// of its elements see the opening under a small solid angle, so their closure is just
+/// below one and their 16 closure rays usually all meet a wall. Fitting those rows to one
+/// (the rule until this test) let out 8.75 % of the emitted light against the rows' 9.95 %
+/// (stochastic Jacobi, exact in its balance: 9.93 % at this mesh, 9.98 % at half of it);
+/// fitted to their expected closure ([`radiosity::transport::hierarchical::CLOSED_PRIOR`])
+/// the hierarchy agrees with the rows to 3 % of the escaped share (measured 2 %).
+#[test]
+fn an_open_corridor_lets_out_what_the_rows_let_out() {
+    let mut d = SceneDesc { name: "corridor".into(), ..Default::default() };
+    d.materials.push(MaterialDesc {
+        emission: Rgb::ONE,
+        two_sided: Some(false),
+        ..MaterialDesc::diffuse("grey", Rgb::splat(0.5))
+    });
+    d.objects.push(ObjectDesc { name: "corridor".into(), loc: None });
+    let mut faces = box_faces(v(0., 0., 0.), v(4., 1., 1.), true);
+    faces.remove(4); // the end at x = 4
+    for p in faces {
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: p, material: 0, object: 0, loc: None });
+    }
+    let scene = Scene::from_desc(d).unwrap();
+    let escaped = |kind: Kind| {
+        let s = Settings { transport: kind, mesh_size: Some(0.1), ..Default::default() };
+        let solved = solve_scene(scene.clone(), &s, &NoProgress).unwrap();
+        let e = &solved.solution.energy;
+        (e.escaped[1] + e.back_faces[1]) / e.emitted[1]
+    };
+    let (rows, hier) = (escaped(Kind::Rows), escaped(Kind::Hierarchical));
+    assert!((hier / rows - 1.0).abs() < 0.03, "escaped: rows {rows:.4}, hierarchy {hier:.4}");
+}
