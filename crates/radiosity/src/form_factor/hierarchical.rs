@@ -73,13 +73,16 @@
 //! - its *closure*, the fraction of rays whose first hit is a front face. What its links
 //!   bring is fitted to it ([`crate::transport::hierarchical::Closure`]): coarse links
 //!   between nodes that touch are biased low beside a shared edge, the rays are not
-//!   (without the fit 13.5 % of the conference room's light went missing). A row still far
+//!   (without the fit 13.5 % of the conference room's light went missing). An element
+//!   whose rays all met a surface is fitted to its expected closure, not to one
+//!   ([`crate::transport::hierarchical::CLOSED_PRIOR`]). A row still far
 //!   short of its closure after the fit (below the lower end of its Wilson interval at
 //!   `RAY_ROW_Z`: a face a few units from a wall, behind a mounted board, that no link
 //!   reaches from its side) is traced instead: `RAY_ROW_FACTOR` × as many rays, the share of
 //!   them landing on each element its factor (Monte Carlo form factors;
-//!   [`crate::transport::Hierarchy::set_ray_rows`]), where emitted light goes through the
-//!   direct columns or is spread (rays find concentrated lights poorly). In the conference
+//!   [`crate::transport::Hierarchy::set_ray_rows`], which fits the other rows again without
+//!   them), where emitted light goes through the direct columns or is spread (rays find
+//!   concentrated lights poorly). In the conference
 //!   room in a furnace this took the elements off by more than 1 % from 262 598 to 57 040.
 //!
 //! Two elements take the point-sampled factor of [`super::point_sampled`]'s kernel: the
