@@ -597,7 +597,12 @@ fn ray_row(
     hemisphere_rays(mesh, rays, receivers, seed ^ 0x5241_5952, m, eps, i as usize, |p, dir, hit| {
         if let Some(j) = locator.front_hit(mesh, rays, p, dir, hit) {
             if j != i && !emitters.is_some_and(|em| em.binary_search(&j).is_ok()) {
-                hits.push(j);
+                // An element the coverage test found covered (no open area: nothing links
+                // to it, and it gathers nothing) holds only its emission; the ray met it
+                // all the same (the inside of a thin closed slab, whose faces across the
+                // gap count as in contact). Its light is taken to be the element's own.
+                let covered = !(tree.nodes[tree.leaf_of[j as usize] as usize].area > 0.0);
+                hits.push(if covered { i } else { j });
             }
         }
     });

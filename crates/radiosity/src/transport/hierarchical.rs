@@ -1283,6 +1283,11 @@ impl Hierarchy {
         self.direct.as_ref()
     }
 
+    /// The rows traced by rays in place of links ([`Hierarchy::set_ray_rows`]), if any.
+    pub fn ray_rows(&self) -> Option<&SparseRows> {
+        self.ray_rows.as_ref()
+    }
+
     /// Links received by node `k` with their vectors and readings: (source node, factor,
     /// gradient or direction of arrival, reading), for diagnostics.
     pub fn links_full(&self, k: u32) -> impl Iterator<Item = (u32, f32, [f32; 3], [f32; 4])> + '_ {
