@@ -198,6 +198,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     report.timings.load = load_s;
     report.timings.render = t.elapsed().as_secs_f64();
     report.images.push(a.output.display().to_string());
+    report.timings.stages = progress.stages();
     report.timings.total = t0.elapsed().as_secs_f64();
     if let Some(p) = &a.solve.report {
         write_atomic(p, serde_json::to_string_pretty(&report)?.as_bytes())?;

@@ -33,6 +33,8 @@ pub struct CliProgress {
     bar: Mutex<Option<ProgressBar>>,
     /// The current stage and when it began (for the log line when stderr is no terminal).
     stage: Mutex<Option<(String, std::time::Instant)>>,
+    /// Every finished stage with its seconds, for the report.
+    done: Mutex<Vec<radiosity::report::StageTime>>,
     quiet: bool,
     log: bool,
 }
@@ -41,12 +43,24 @@ impl CliProgress {
     /// A reporter.
     pub fn new(quiet: bool) -> Self {
         use std::io::IsTerminal;
-        CliProgress { bar: Mutex::new(None), stage: Mutex::new(None), quiet, log: !std::io::stderr().is_terminal() }
+        CliProgress {
+            bar: Mutex::new(None),
+            stage: Mutex::new(None),
+            done: Mutex::new(Vec::new()),
+            quiet,
+            log: !std::io::stderr().is_terminal(),
+        }
+    }
+
+    /// The stages finished so far with their seconds (for `Timings::stages`).
+    pub fn stages(&self) -> Vec<radiosity::report::StageTime> {
+        self.done.lock().unwrap().clone()
     }
 }
 
 impl Progress for CliProgress {
     fn begin(&self, stage: &str, total: u64) {
+        *self.stage.lock().unwrap() = Some((stage.to_string(), std::time::Instant::now()));
         if self.quiet {
             return;
         }
@@ -59,7 +73,6 @@ impl Progress for CliProgress {
         bar.set_message(stage.to_string());
         bar.enable_steady_tick(Duration::from_millis(200));
         *self.bar.lock().unwrap() = Some(bar);
-        *self.stage.lock().unwrap() = Some((stage.to_string(), std::time::Instant::now()));
     }
     fn advance(&self, n: u64) {
         if let Some(b) = self.bar.lock().unwrap().as_ref() {
@@ -77,6 +90,7 @@ impl Progress for CliProgress {
             if self.log && !self.quiet && s >= 1.0 {
                 eprintln!("{stage}: {s:.1} s");
             }
+            self.done.lock().unwrap().push(radiosity::report::StageTime { stage, seconds: s });
         }
     }
     fn message(&self, msg: &str) {

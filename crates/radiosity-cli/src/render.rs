@@ -396,6 +396,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         report.images.extend(write_frames(dir, &frames, a.width, a.height, exposure)?);
     }
     report.timings.render = t.elapsed().as_secs_f64();
+    report.timings.stages = progress.stages();
+    report.timings.stages.extend(quiet.stages());
     report.timings.total = t0.elapsed().as_secs_f64();
     if let Some(p) = &a.solve.report {
         write_atomic(p, serde_json::to_string_pretty(&report)?.as_bytes())?;

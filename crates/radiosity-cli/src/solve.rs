@@ -67,6 +67,7 @@ pub fn run(a: SolveArgs) -> Result<ExitCode> {
         write_atomic(p, &convergence_png(&title, &series, 1200, 520)?)?;
         report.images.push(p.display().to_string());
     }
+    report.timings.stages = progress.stages();
     report.timings.total = t0.elapsed().as_secs_f64();
     let json = serde_json::to_string_pretty(&report)?;
     match &a.solve.report {

@@ -110,3 +110,25 @@ fn solver_all_max_iterations_caps_every_solver_in_its_documented_unit() {
     assert!(help.contains("sweeps of n shots"), "{help}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The report's `timings.stages`: every stage the progress saw, in order, with its seconds
+/// — for the hierarchy its coverage, closure, links (issue 10: time per phase), for rows
+/// the form factors — each within the run's total, also with `-q`.
+#[test]
+fn report_lists_the_time_of_every_stage() {
+    let dir = tempdir("stages");
+    for (transport, needs) in [("hierarchical", &["coverage", "closure", "links"][..]), ("rows", &["form factors"][..])] {
+        let out = radiosity(&dir, &["solve", "cornell", "--mesh-size", "60", "--transport", transport, "-q", "--report", "r.json"]);
+        assert!(out.status.success(), "{transport}: {}", String::from_utf8_lossy(&out.stderr));
+        let r: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("r.json")).unwrap()).unwrap();
+        let total = r["timings"]["total"].as_f64().unwrap();
+        let stages = r["timings"]["stages"].as_array().expect("timings.stages");
+        let names: Vec<&str> = stages.iter().map(|s| s["stage"].as_str().unwrap()).collect();
+        for n in needs {
+            assert!(names.contains(n), "{transport}: {names:?}");
+        }
+        let sum: f64 = stages.iter().map(|s| s["seconds"].as_f64().unwrap()).sum();
+        assert!(stages.iter().all(|s| s["seconds"].as_f64().unwrap() >= 0.0) && sum <= total, "{transport}: stages {sum} s, total {total} s");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -51,6 +51,20 @@ pub struct Timings {
     pub render: f64,
     /// Whole run.
     pub total: f64,
+    /// Every stage that reported progress, in order, with its seconds (the hierarchy's
+    /// coverage, closure, direct light, links and ray rows; the form-factor rows; the final
+    /// gather ...), as the command line's progress saw them.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub stages: Vec<StageTime>,
+}
+
+/// One stage's wall time ([`Timings::stages`]).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct StageTime {
+    /// The stage, as named to [`crate::Progress::begin`].
+    pub stage: String,
+    /// Wall seconds from its begin to its end.
+    pub seconds: f64,
 }
 
 /// Energy bookkeeping (power per RGB channel, scene units): emitted = absorbed + escaped +
