@@ -378,10 +378,11 @@ fn thread_counts_out_of_range_are_refused_at_once() {
     assert!(files_in(&d).is_empty());
 }
 
-/// An OBJ cube of side 1 whose faces look inwards (a closed room), without a camera.
-fn closed_room(d: &Path) -> PathBuf {
-    std::fs::write(d.join("room.mtl"), "newmtl wall\nKd 0.5 0.5 0.5\nKe 1 1 1\n").unwrap();
-    let mut obj = String::from("mtllib room.mtl\nusemtl wall\n");
+/// An OBJ cube of side 1 whose faces look inwards (a closed room), without a camera:
+/// `NAME.obj` with `NAME.mtl` holding `mtl`, the walls of material `wall`, then `extra`.
+fn cube_room(d: &Path, name: &str, mtl: &str, extra: &str) -> PathBuf {
+    std::fs::write(d.join(format!("{name}.mtl")), mtl).unwrap();
+    let mut obj = format!("mtllib {name}.mtl\nusemtl wall\n");
     for (x, y, z) in [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)] {
         obj.push_str(&format!("v {x} {y} {z}\n"));
     }
@@ -389,9 +390,15 @@ fn closed_room(d: &Path) -> PathBuf {
     for f in ["1 2 3 4", "5 8 7 6", "1 5 6 2", "4 3 7 8", "1 4 8 5", "2 6 7 3"] {
         obj.push_str(&format!("f {f}\n"));
     }
-    let p = d.join("room.obj");
+    obj.push_str(extra);
+    let p = d.join(format!("{name}.obj"));
     std::fs::write(&p, obj).unwrap();
     p
+}
+
+/// The closed room with glowing grey walls.
+fn closed_room(d: &Path) -> PathBuf {
+    cube_room(d, "room", "newmtl wall\nKd 0.5 0.5 0.5\nKe 1 1 1\n", "")
 }
 
 #[test]
@@ -429,24 +436,14 @@ fn default_camera_of_a_closed_room_is_placed_inside() {
 
 /// A closed unit room of grey walls (inward) lit by a lamp under its ceiling, facing down.
 fn lamp_room(d: &Path) -> PathBuf {
-    std::fs::write(d.join("lamp-room.mtl"), "newmtl wall\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n").unwrap();
-    let mut obj = String::from("mtllib lamp-room.mtl\nusemtl wall\n");
-    for (x, y, z) in [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)] {
-        obj.push_str(&format!("v {x} {y} {z}\n"));
-    }
-    for f in ["1 2 3 4", "5 8 7 6", "1 5 6 2", "4 3 7 8", "1 4 8 5", "2 6 7 3"] {
-        obj.push_str(&format!("f {f}\n"));
-    }
-    obj.push_str("v 0.4 0.95 0.4\nv 0.6 0.95 0.4\nv 0.6 0.95 0.6\nv 0.4 0.95 0.6\nusemtl lamp\nf 9 10 11 12\n");
-    let p = d.join("lamp-room.obj");
-    std::fs::write(&p, obj).unwrap();
-    p
+    cube_room(
+        d,
+        "lamp-room",
+        "newmtl wall\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n",
+        "v 0.4 0.95 0.4\nv 0.6 0.95 0.4\nv 0.6 0.95 0.6\nv 0.4 0.95 0.6\nusemtl lamp\nf 9 10 11 12\n",
+    )
 }
 
-/// Issue 9: with `--two-sided` the default camera, outside the room, saw only the unlit
-/// outsides of the walls — a black image without a word. The camera is now moved inside
-/// (the backs-of-one-sided-walls check could not see this: the walls are fronts); an
-/// explicit camera there is warned about.
 #[test]
 fn default_camera_outside_a_two_sided_room_moves_inside_and_an_explicit_one_is_warned() {
     let d = case_dir("lamp-room");

@@ -490,9 +490,8 @@ pub fn link(
     // direct columns carry it, or where emission is spread (a furnace, a glowing wall).
     let traced = emitters.is_some() || !ctx.sharp;
     drop(ctx);
-    let fraction = closure.as_ref().map(|c| c.fraction.clone()).filter(|_| traced);
     let mut h = Hierarchy::from_parts(tree, parts, direct_rows, closure, stats);
-    if let Some(fraction) = fraction {
+    if let Some(fraction) = h.closure().map(|c| &c.fraction).filter(|_| traced) {
         // Elements whose rows fall far short of their closure gather by rays instead.
         let sums = h.row_sums();
         let m = opts.closure_rays as f64;

@@ -900,10 +900,11 @@ impl Hierarchy {
         self.apply(&ones, &mut links, false, false);
         // Per group: area, Σ A·links, Σ A·direct, Σ A·closure, rays.
         let groups = c.group.iter().copied().max().map_or(0, |g| g as usize + 1);
+        let is_traced = |i: usize| traced.get(i).copied().unwrap_or(false);
         let mut acc = vec![(0.0f64, 0.0f64, 0.0f64, 0.0f64, 0u64); groups];
         for i in 0..n {
             let a = self.tree.nodes[self.tree.leaf_of[i] as usize].area as f64;
-            if !(a > 0.0 && c.fraction[i].is_finite()) || traced.get(i) == Some(&true) {
+            if !(a > 0.0 && c.fraction[i].is_finite()) || is_traced(i) {
                 continue;
             }
             let d = self.direct.as_ref().map_or(0.0, |d| d.row_sum(i));
@@ -953,7 +954,7 @@ impl Hierarchy {
                 scale[c.group[i] as usize]
             };
             self.link_scale[i] = s as f32;
-            if a > 0.0 && traced.get(i) != Some(&true) {
+            if a > 0.0 && !is_traced(i) {
                 wsum += a * s;
                 asum += a;
                 fitted += (s != 1.0) as u64;
@@ -1281,6 +1282,11 @@ impl Hierarchy {
     /// links.
     pub fn direct(&self) -> Option<&SparseRows> {
         self.direct.as_ref()
+    }
+
+    /// The closure the links were fitted to, if any ([`Hierarchy::from_parts`]).
+    pub fn closure(&self) -> Option<&Closure> {
+        self.closure.as_ref()
     }
 
     /// The rows traced by rays in place of links ([`Hierarchy::set_ray_rows`]), if any.
