@@ -47,26 +47,12 @@ pub fn point_to_point(x: DVec3, n: DVec3, y: DVec3, ny: DVec3, area: f64) -> f64
 
 /// As [`point_to_polygon`] without the front-side test.
 pub fn point_to_polygon_unsided(x: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
-    if poly.len() < MAXV {
-        let mut rel = [DVec3::ZERO; MAXV];
-        let mut buf = [DVec3::ZERO; MAXV];
-        contour(x, n, poly, &mut rel, &mut buf)
-    } else {
-        let mut rel = vec![DVec3::ZERO; poly.len()];
-        let mut buf = vec![DVec3::ZERO; poly.len() + 1];
-        contour(x, n, poly, &mut rel, &mut buf)
-    }
-}
-
-/// The clipped contour sum; `rel` holds `poly.len()` and `buf` `poly.len() + 1` points.
-fn contour(x: DVec3, n: DVec3, poly: &[DVec3], rel: &mut [DVec3], buf: &mut [DVec3]) -> f64 {
-    // Positions relative to x, clipped to the upper half-space n·R >= 0.
-    let mut all_above = true;
+    // Heights over the tangent plane of x; the polygon is clipped to n·R >= 0 only when it
+    // crosses it (most calls: no clipping, no buffers).
     let mut any_above = false;
-    let len = poly.len();
-    for (k, p) in poly.iter().enumerate() {
-        rel[k] = *p - x;
-        if n.dot(rel[k]) > 0.0 {
+    let mut all_above = true;
+    for p in poly {
+        if n.dot(*p - x) > 0.0 {
             any_above = true;
         } else {
             all_above = false;
@@ -75,42 +61,59 @@ fn contour(x: DVec3, n: DVec3, poly: &[DVec3], rel: &mut [DVec3], buf: &mut [DVe
     if !any_above {
         return 0.0;
     }
-    let verts: &[DVec3] = if all_above {
-        &rel[..len]
+    if all_above {
+        return contour_sum(n, poly.len(), |k| poly[k] - x);
+    }
+    if poly.len() < MAXV {
+        let mut buf = [DVec3::ZERO; MAXV];
+        clipped(x, n, poly, &mut buf)
     } else {
-        let mut m = 0;
-        for k in 0..len {
-            let (a, b) = (rel[k], rel[(k + 1) % len]);
-            let (ha, hb) = (n.dot(a), n.dot(b));
-            if ha > 0.0 {
-                buf[m] = a;
-                m += 1;
-            }
-            if (ha > 0.0) != (hb > 0.0) {
-                let t = ha / (ha - hb);
-                // Project exactly onto the plane to avoid tiny negative heights.
-                let p = a + (b - a) * t;
-                buf[m] = p - n * n.dot(p);
-                m += 1;
-            }
+        let mut buf = vec![DVec3::ZERO; poly.len() + 1];
+        clipped(x, n, poly, &mut buf)
+    }
+}
+
+/// The contour sum of the part of `poly` above the tangent plane of `x` (Sutherland–Hodgman
+/// against n·R > 0); `buf` holds `poly.len() + 1` points.
+fn clipped(x: DVec3, n: DVec3, poly: &[DVec3], buf: &mut [DVec3]) -> f64 {
+    let len = poly.len();
+    let mut m = 0;
+    for k in 0..len {
+        let (a, b) = (poly[k] - x, poly[(k + 1) % len] - x);
+        let (ha, hb) = (n.dot(a), n.dot(b));
+        if ha > 0.0 {
+            buf[m] = a;
+            m += 1;
         }
-        if m < 3 {
-            return 0.0;
+        if (ha > 0.0) != (hb > 0.0) {
+            let t = ha / (ha - hb);
+            // Project exactly onto the plane to avoid tiny negative heights.
+            let p = a + (b - a) * t;
+            buf[m] = p - n * n.dot(p);
+            m += 1;
         }
-        &buf[..m]
-    };
+    }
+    if m < 3 {
+        return 0.0;
+    }
+    contour_sum(n, m, |k| buf[k])
+}
+
+/// `1/(2π) |Σ_k n·Γ_k|` over the closed contour of the `m` points `rel(k)` (positions
+/// relative to x, all on or above its tangent plane).
+#[inline]
+fn contour_sum(n: DVec3, m: usize, rel: impl Fn(usize) -> DVec3) -> f64 {
     let mut sum = 0.0;
-    let mv = verts.len();
-    for k in 0..mv {
-        let a = verts[k];
-        let b = verts[(k + 1) % mv];
+    let mut a = rel(m - 1);
+    for k in 0..m {
+        let b = rel(k);
         let c = a.cross(b);
         let s = c.length();
-        if s <= 0.0 {
-            continue;
+        if s > 0.0 {
+            let theta = s.atan2(a.dot(b));
+            sum += n.dot(c) * (theta / s);
         }
-        let theta = s.atan2(a.dot(b));
-        sum += n.dot(c) * (theta / s);
+        a = b;
     }
     (sum.abs() / (2.0 * std::f64::consts::PI)).min(1.0)
 }
