@@ -102,6 +102,15 @@ impl Progress for CliProgress {
             None => eprintln!("{msg}"),
         }
     }
+    /// Warnings print under `--quiet` too (the flag's promise: no progress, but errors and
+    /// warnings).
+    fn warning(&self, msg: &str) {
+        let msg = format!("warning: {msg}");
+        match self.bar.lock().unwrap().as_ref() {
+            Some(b) => b.println(msg),
+            None => eprintln!("{msg}"),
+        }
+    }
     fn should_stop(&self) -> bool {
         stopped()
     }

@@ -410,9 +410,11 @@ fn camera_that_sees_only_back_faces_or_nothing_warns() {
     assert_eq!(code, Some(0), "{err}");
     assert!(err.contains("warning: view 'main': the camera at (0.5, 0.5, -2) sees only back faces"), "{err}");
     assert!(err.contains("use --two-sided or move the camera inside"), "{err}");
-    // Two-sided walls are seen from outside: no warning.
+    // Two-sided walls are seen from outside: no warning about the view (their outer sides
+    // glow too, and the hint about two-sided emitters says so).
     let (_, err, _) = run_in(&d, &[&base[..], &["--eye", "0.5,0.5,-2", "--look-at", "0.5,0.5,0.5", "--two-sided"]].concat());
-    assert!(!err.contains("warning"), "{err}");
+    assert!(!err.contains("warning: view"), "{err}");
+    assert!(err.contains("is emitted by the back sides of two-sided emitters ('furnace')"), "{err}");
     // Looking away from everything.
     let (_, err, _) = run_in(&d, &[&base[..], &["--eye", "0.5,0.5,-2", "--look-at", "0.5,0.5,-3"]].concat());
     assert!(err.contains("sees no surface"), "{err}");
@@ -585,4 +587,74 @@ fn camera_flags_at_extreme_or_degenerate_values_are_refused() {
     let (code, err) = run(&["render", "furnace", "-o", png.to_str().unwrap(), "-q", "--eye", "nan,0.5,0.5"]);
     assert_eq!(code, Some(2), "{err}");
     assert!(err.contains("finite"), "{err}");
+}
+
+/// A glowing unit floor under a wide two-sided blocker with a wide ceiling above it.
+/// Analytic factors see the ceiling through the blocker, so the floor's light is received
+/// twice: the books close only with a negative escaped term (about −7 % here).
+fn floor_blocker_ceiling(d: &Path) -> PathBuf {
+    std::fs::write(d.join("b.mtl"), "newmtl lamp\nKd 0.5 0.5 0.5\nKe 1 1 1\nnewmtl grey\nKd 0.8 0.8 0.8\n").unwrap();
+    let obj = "mtllib b.mtl\n\
+        v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n\
+        v -4.5 -4.5 1\nv 5.5 -4.5 1\nv 5.5 5.5 1\nv -4.5 5.5 1\n\
+        v -4.5 -4.5 0.5\nv 5.5 -4.5 0.5\nv 5.5 5.5 0.5\nv -4.5 5.5 0.5\n\
+        usemtl lamp\nf 1 2 3 4\nusemtl grey\nf 5 8 7 6\nf 9 10 11 12\n";
+    let p = d.join("b.obj");
+    std::fs::write(&p, obj).unwrap();
+    p
+}
+
+#[test]
+fn created_light_is_warned_even_under_quiet() {
+    let d = case_dir("created");
+    floor_blocker_ceiling(&d);
+    let base = ["solve", "b.obj", "--two-sided", "--mesh-size", "0.5", "-q", "--report", "r.json"];
+    let (code, err, _) = run_in(&d, &[&base[..], &["--form-factors", "analytic"]].concat());
+    assert_eq!(code, Some(0), "{err}");
+    // The energy line's own escaped term is below −1 % of the emitted power.
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("r.json")).unwrap()).unwrap();
+    let e = &report["energy"];
+    let escaped = e["escaped"][1].as_f64().unwrap() / e["emitted"][1].as_f64().unwrap();
+    assert!(escaped < -0.01, "escaped {escaped}");
+    assert!(err.contains("warning: the solution created light"), "{err}");
+    assert!(err.contains("analytic form factors ignore occlusion, so surfaces exchange light"), "{err}");
+    // Under -q, the form-factor warnings print as well.
+    assert!(err.contains("warning: form factors:"), "{err}");
+    let warnings = report["warnings"].as_array().unwrap();
+    assert!(warnings.iter().any(|w| w.as_str().unwrap().starts_with("the solution created light")), "{warnings:?}");
+    // Occluded factors deliver what was sent: no such warning.
+    let (code, err, _) = run_in(&d, &[&base[..], &["--form-factors", "point-sampled"]].concat());
+    assert_eq!(code, Some(0), "{err}");
+    assert!(!err.contains("created light"), "{err}");
+}
+
+#[test]
+fn two_sided_lamp_in_a_ceiling_is_hinted_and_the_toml_override_closes_the_room() {
+    let d = case_dir("two_sided_lamp");
+    // A closed cube room whose whole ceiling (z = 1) is the lamp; its back side faces out.
+    let mtl = "newmtl wall\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0.5 0.5 0.5\nKe 1 1 1\n";
+    std::fs::write(d.join("room.mtl"), mtl).unwrap();
+    let mut obj = String::from("mtllib room.mtl\n");
+    for (x, y, z) in [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)] {
+        obj.push_str(&format!("v {x} {y} {z}\n"));
+    }
+    obj.push_str("usemtl wall\nf 1 2 3 4\nf 1 5 6 2\nf 4 3 7 8\nf 1 4 8 5\nf 2 6 7 3\nusemtl lamp\nf 5 8 7 6\n");
+    std::fs::write(d.join("room.obj"), obj).unwrap();
+    std::fs::write(d.join("room.toml"), "mesh = \"room.obj\"\ntwo_sided = true\n[materials.lamp]\ntwo_sided = false\n").unwrap();
+    let escaped = |d: &Path| {
+        let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("r.json")).unwrap()).unwrap();
+        r["energy"]["escaped"][1].as_f64().unwrap() / r["energy"]["emitted"][1].as_f64().unwrap()
+    };
+    let base = ["solve", "--mesh-size", "0.25", "-q", "--report", "r.json"];
+    let (code, err, _) = run_in(&d, &[&base[..], &["room.obj", "--two-sided"]].concat());
+    assert_eq!(code, Some(0), "{err}");
+    // Half the lamp's light leaves through its back: 50 % escapes, exactly by geometry.
+    assert!((escaped(&d) - 0.5).abs() < 1e-3, "escaped {}", escaped(&d));
+    assert!(err.contains("warning: 50.0 % of the emitted light escapes, and 50.0 % is emitted by the back sides of two-sided emitters ('lamp')"), "{err}");
+    assert!(err.contains("[materials.NAME] two_sided = false"), "{err}");
+    // The lamp kept one-sided: the room is closed, nothing escapes, no hint.
+    let (code, err, _) = run_in(&d, &[&base[..], &["room.toml"]].concat());
+    assert_eq!(code, Some(0), "{err}");
+    assert!(escaped(&d).abs() < 1e-3, "escaped {}", escaped(&d));
+    assert!(!err.contains("warning"), "{err}");
 }

@@ -151,3 +151,55 @@ pub fn warning(scene: &Scene, loss: &BackFaceLoss, energy: &EnergyBalance) -> Op
         names.join(", ")
     ))
 }
+
+/// Created power, as a fraction of the emitted, above which [`created_warning`] speaks.
+pub const CREATED_WARN_FRACTION: f64 = 0.01;
+
+/// The warning when the books close only with a negative escaped term: the transport
+/// delivered more than the surfaces sent (light created, radiosities too bright), beyond
+/// [`CREATED_WARN_FRACTION`] of the emitted power. `cause` names what in this run does it.
+pub fn created_warning(energy: &EnergyBalance, cause: &str) -> Option<String> {
+    let emitted = luminance(energy.emitted);
+    let escaped = luminance(energy.escaped);
+    if !(emitted > 0.0) || escaped >= -CREATED_WARN_FRACTION * emitted {
+        return None;
+    }
+    Some(format!(
+        "the solution created light: escaped is {:.2} % of the emitted power, so the surfaces received more than \
+         was sent and read too bright; {cause}",
+        100.0 * escaped / emitted
+    ))
+}
+
+/// The hint when more than [`WARN_FRACTION`] of the emitted power escapes and as much is
+/// emitted by the back sides of two-sided emitters (`--two-sided` on a model whose lamps
+/// are panels in a ceiling: half their light goes up, out of the room). Names the emitting
+/// materials whose back sides emit the most.
+pub fn two_sided_emitter_warning(scene: &Scene, energy: &EnergyBalance) -> Option<String> {
+    let emitted = luminance(energy.emitted);
+    let escaped = luminance(energy.escaped);
+    if !(emitted > 0.0) || escaped <= WARN_FRACTION * emitted {
+        return None;
+    }
+    let mut per_material = vec![0.0; scene.materials.len()];
+    for p in scene.polygons.iter().filter(|p| p.back_side) {
+        let m = p.material as usize;
+        per_material[m] += std::f64::consts::PI * luminance(scene.materials[m].emission) * p.area;
+    }
+    let back: f64 = per_material.iter().sum();
+    if back <= WARN_FRACTION * emitted {
+        return None;
+    }
+    let mut mats: Vec<(usize, f64)> = per_material.into_iter().enumerate().filter(|x| x.1 > 0.0).collect();
+    mats.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let names: Vec<String> =
+        mats.iter().take(5).map(|(m, _)| format!("'{}'", scene.materials[*m].name)).collect();
+    Some(format!(
+        "{:.1} % of the emitted light escapes, and {:.1} % is emitted by the back sides of two-sided emitters \
+         ({}): if these lights shine only from their front, keep them one-sided in a TOML scene \
+         ([materials.NAME] two_sided = false) while the rest stays two-sided",
+        100.0 * escaped / emitted,
+        100.0 * back / emitted,
+        names.join(", ")
+    ))
+}

@@ -364,7 +364,7 @@ impl Prepared {
                              this happens near coincident, touching or interpenetrating surfaces",
                             h.stats.rows_scaled, h.stats.max_row_sum
                         );
-                        progress.message(&format!("warning: {w}"));
+                        progress.warning(&w);
                         warnings.push(w);
                     }
                     let stats = form_factor::Stats {
@@ -444,7 +444,31 @@ impl Prepared {
         );
         let mut warnings = Vec::new();
         if let Some(w) = crate::back_faces::warning(&self.scene, &loss, &solution.energy) {
-            progress.message(&format!("warning: {w}"));
+            progress.warning(&w);
+            warnings.push(w);
+        }
+        let cause = match (&self.transport, &self.ff_stats) {
+            (_, Some(st)) if st.method == form_factor::Method::Analytic.name() => {
+                "analytic form factors ignore occlusion, so surfaces exchange light through what stands between them: \
+                 use point-sampled, monte-carlo, hemicube or adaptive form factors"
+            }
+            (Some(Operator::Hierarchical(_)), _) => {
+                "the hierarchical operator's closure fit scales short rows up as a whole and overshoots at coarse link \
+                 sizes (BENCHMARKS.md): a smaller --link-min-size reduces it, --transport rows avoids it"
+            }
+            (_, Some(st)) if st.guard.rows_corrected > 0 => {
+                "rows of form factors that summed above 1 were scaled, and their columns still send more than \
+                 reciprocity allows (see the form-factor warning): a finer --mesh-size or another --form-factors helps"
+            }
+            (None, None) => "the stochastic estimate is noisy: more --rays reduce it",
+            _ => "the form factors are not reciprocal (A_i F_ij differs from A_j F_ji): a finer --mesh-size or more rays helps",
+        };
+        if let Some(w) = crate::back_faces::created_warning(&solution.energy, cause) {
+            progress.warning(&w);
+            warnings.push(w);
+        }
+        if let Some(w) = crate::back_faces::two_sided_emitter_warning(&self.scene, &solution.energy) {
+            progress.warning(&w);
             warnings.push(w);
         }
         for l in self.scene.lights.iter().filter(|l| crate::lights::enclosed(&self.scene, &self.rays, l)) {
@@ -453,7 +477,7 @@ impl Prepared {
                 "{at}light '{}' is inside closed geometry (every ray from it meets the back of a surface): its light reaches no surface",
                 l.name
             );
-            progress.message(&format!("warning: {w}"));
+            progress.warning(&w);
             warnings.push(w);
         }
         let t = Instant::now();

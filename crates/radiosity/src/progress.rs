@@ -17,6 +17,12 @@ pub trait Progress: Sync {
     fn end(&self) {}
     /// A one-line status, e.g. a solver's residual after an iteration.
     fn message(&self, _msg: &str) {}
+    /// Something the user should know about the result (`msg` without a "warning:"
+    /// prefix). Unlike [`Progress::message`] it is meant to be shown even when progress
+    /// is not; by default it is a message.
+    fn warning(&self, msg: &str) {
+        self.message(&format!("warning: {msg}"));
+    }
     /// True when the user asked to stop; work ends early and keeps what it has.
     fn should_stop(&self) -> bool {
         false

@@ -412,7 +412,7 @@ fn guard_warning(guard: &RowGuard, progress: &dyn Progress, warnings: &mut Vec<S
 /// Shows `w` (if any) and keeps it for the report.
 fn push_warning(w: Option<String>, progress: &dyn Progress, warnings: &mut Vec<String>) {
     if let Some(w) = w {
-        progress.message(&format!("warning: {w}"));
+        progress.warning(&w);
         warnings.push(w);
     }
 }
@@ -423,7 +423,7 @@ fn warn_occlusion(scene: &Scene, progress: &dyn Progress, warnings: &mut Vec<Str
             "analytic form factors ignore occlusion, and this scene can occlude ({why}); \
              use adaptive, monte-carlo, point-sampled or hemicube for occluded factors"
         );
-        progress.message(&format!("warning: {w}"));
+        progress.warning(&w);
         warnings.push(w);
     }
 }
