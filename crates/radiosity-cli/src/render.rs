@@ -14,7 +14,7 @@ use radiosity::output;
 use radiosity::pipeline::{render_radiosity, solve_scene, solve_scene_observed};
 use radiosity::render::gather;
 use radiosity::render::gouraud::{self, ElementTracer, Shading};
-use radiosity::render::{lit_coverage, view_coverage, Image};
+use radiosity::render::{lit_coverage, view_coverage, Image, ViewCoverage};
 use radiosity::report::ViewReport;
 use radiosity::scene::{Camera, Scene};
 use radiosity::solve::{IterationState, StopReason};
@@ -297,12 +297,26 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             // The default camera shows lit surfaces in under a quarter of the image: an
             // inside camera that shows at least twice as many is taken.
             if framed && a.frames.is_none() && seen * 4 < total {
-                if let Some(inside) = inside_camera(&solved.scene, cam, a.fov).filter(|c| lit(c).0 >= 2 * seen.max(1)) {
+                // The same framing from the opposite side (a Cornell box open towards +z)
+                // when it shows lit surfaces in a quarter of the image, else the one of it
+                // and a camera inside that shows the most, if at least twice as many.
+                let scored: Vec<(usize, Camera, &str)> = [
+                    opposite_camera(cam).map(|c| (c, "the same view from the opposite side")),
+                    inside_camera(&solved.scene, cam, a.fov).map(|c| (c, "a camera inside")),
+                ]
+                .into_iter()
+                .flatten()
+                .map(|(c, what)| (lit(&c).0, c, what))
+                .collect();
+                let best = scored.iter().find(|(n, _, _)| n * 4 >= total).copied().or_else(|| {
+                    scored.iter().filter(|(n, _, _)| *n >= 2 * seen.max(1)).max_by_key(|(n, _, _)| *n).copied()
+                });
+                if let Some((_, better, what)) = best {
                     if !a.solve.quiet {
-                        let (o, p) = (cam.position, inside.position);
+                        let (o, p) = (cam.position, better.position);
                         eprintln!(
                             "note: the default camera, outside at ({:.4}, {:.4}, {:.4}), sees lit surfaces in {:.1} % of the \
-                             image; using a camera inside at ({:.4}, {:.4}, {:.4}) (--eye/--look-at or --camera choose another)",
+                             image; using {what} at ({:.4}, {:.4}, {:.4}) (--eye/--look-at or --camera choose another)",
                             o.x,
                             o.y,
                             o.z,
@@ -312,7 +326,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                             p.z
                         );
                     }
-                    *cam = inside;
+                    *cam = better;
                     continue;
                 }
             }
@@ -474,20 +488,41 @@ pub(crate) fn default_camera_inside(scene: &Scene, outside: Camera, width: usize
     if before.problem().is_none() || before.back * 100 < before.total() {
         return outside;
     }
-    let Some(inside) = inside_camera(scene, &outside, fov) else { return outside };
-    let after = view_coverage(scene, &rays, &inside, width, height, 64);
-    if after.front <= before.front {
-        return outside;
-    }
+    // The same framing from the opposite side first (a box open on the far side), then a
+    // camera inside (a closed room): the one that sees the most front faces.
+    // The opposite side is taken when its view has no problem.
+    let scored: Vec<(ViewCoverage, Camera, &str)> = [
+        opposite_camera(&outside).map(|c| (c, "the same view from the opposite side")),
+        inside_camera(scene, &outside, fov).map(|c| (c, "a camera inside")),
+    ]
+    .into_iter()
+    .flatten()
+    .map(|(c, what)| (view_coverage(scene, &rays, &c, width, height, 64), c, what))
+    .collect();
+    let best = scored.iter().find(|(v, _, _)| v.problem().is_none()).or_else(|| {
+        scored.iter().filter(|(v, _, _)| v.front > before.front).max_by_key(|(v, _, _)| v.front)
+    });
+    let Some((_, better, what)) = best.map(|(v, c, w)| (v.front, *c, *w)) else { return outside };
     if !quiet {
-        let (o, p) = (outside.position, inside.position);
+        let (o, p) = (outside.position, better.position);
         eprintln!(
-            "note: the default camera, outside the scene at ({:.4}, {:.4}, {:.4}), sees only the backs of its one-sided \
-             surfaces (a closed room); using a camera inside at ({:.4}, {:.4}, {:.4}) (--eye/--look-at or --camera choose another)",
+            "note: the default camera, outside the scene at ({:.4}, {:.4}, {:.4}), sees mostly the backs of its one-sided \
+             surfaces; using {what} at ({:.4}, {:.4}, {:.4}) (--eye/--look-at or --camera choose another)",
             o.x, o.y, o.z, p.x, p.y, p.z
         );
     }
-    inside
+    better
+}
+
+/// `outside` turned half a turn about the up axis through the point it looks at: the same
+/// framing seen from the other side.
+fn opposite_camera(outside: &Camera) -> Option<Camera> {
+    let up = outside.up.normalize_or_zero();
+    let d = outside.position - outside.look_at;
+    // Keep the part along up, reverse the rest.
+    let along = up * d.dot(up);
+    let turned = Camera { position: outside.look_at + along - (d - along), ..*outside };
+    turned.validate().ok().map(|_| turned)
 }
 
 /// A camera inside the scene's bounding box on the line of sight of `outside` (from 0.8 of

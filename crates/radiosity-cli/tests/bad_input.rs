@@ -464,6 +464,48 @@ fn default_camera_outside_a_two_sided_room_moves_inside_and_an_explicit_one_is_w
     assert!(!err.contains("using a camera inside"), "{err}");
 }
 
+/// A box open towards +z (as the McGuire and glTF Cornell boxes are, where Cornell's own data
+/// opens towards −z), one-sided walls facing in, a lamp under its ceiling.
+fn box_open_towards_plus_z(d: &Path, name: &str, two_sided_toml: bool) -> PathBuf {
+    std::fs::write(d.join("open.mtl"), "newmtl wall\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 5 5 5\n").unwrap();
+    let mut obj = String::from("mtllib open.mtl\nusemtl wall\n");
+    for (x, y, z) in [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)] {
+        obj.push_str(&format!("v {x} {y} {z}\n"));
+    }
+    // cube_room's faces without the one at z = 1.
+    for f in ["1 2 3 4", "1 5 6 2", "4 3 7 8", "1 4 8 5", "2 6 7 3"] {
+        obj.push_str(&format!("f {f}\n"));
+    }
+    obj.push_str("v 0.4 0.95 0.4\nv 0.6 0.95 0.4\nv 0.6 0.95 0.6\nv 0.4 0.95 0.6\nusemtl lamp\nf 9 10 11 12\n");
+    std::fs::write(d.join("open.obj"), obj).unwrap();
+    if two_sided_toml {
+        // Two-sided walls: the outside of the back wall is seen, dark, before the solve
+        // shows it unlit.
+        let p = d.join(format!("{name}.toml"));
+        std::fs::write(&p, "mesh = \"open.obj\"\ntwo_sided = true\n[materials.lamp]\ntwo_sided = false\n").unwrap();
+        p
+    } else {
+        d.join("open.obj")
+    }
+}
+
+#[test]
+fn default_camera_behind_a_box_open_on_the_far_side_looks_from_the_open_side() {
+    let d = case_dir("open-box");
+    for two_sided in [false, true] {
+        let scene = box_open_towards_plus_z(&d, "open", two_sided);
+        let args = ["render", scene.to_str().unwrap(), "--mesh-size", "0.25", "--width", "16", "--height", "16", "--render", "gouraud", "-o", "x.png", "--exr", "x.exr"];
+        let (code, err, _) = run_in(&d, &args);
+        assert_eq!(code, Some(0), "{err}");
+        assert!(err.contains("using the same view from the opposite side at (0.5000, "), "two-sided {two_sided}: {err}");
+        assert!(!err.contains("warning: view"), "{err}");
+        // From the open side the lit inside fills most of the frame.
+        let img = radiosity::output::exr::read(&d.join("x.exr")).unwrap();
+        let lit = img.pixels.iter().filter(|p| p.x > 0.0).count();
+        assert!(lit * 2 > 16 * 16, "two-sided {two_sided}: {lit} of 256 pixels lit");
+    }
+}
+
 // ---------------------------------------------------------------- hostile-input audit
 
 #[test]

@@ -472,6 +472,19 @@ fn scene_without_light_is_an_error_saying_what_was_skipped() {
     // A scene with light passes.
     let s = load("lit.obj", &format!("{QUAD}f 1 2 3 4\nusemtl lamp\nf 1 2 3\n")).unwrap();
     s.check_emits().unwrap();
+    // A light given by name only (the glTF Cornell box of kajiya, material "light", no
+    // emissiveFactor): the error says how to give it an emission, and that works.
+    write("named.mtl", "newmtl wall\nKd 0.5 0.5 0.5\nnewmtl Ceiling Light\nKd 0.5 0.5 0.5\n");
+    let obj = "mtllib named.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl wall\nf 1 2 3\nusemtl Ceiling Light\nf 1 3 4\n";
+    let e = load("named.obj", obj).unwrap().check_emits().unwrap_err().to_string();
+    let hint = "material 'Ceiling Light' looks like a light: give it an emission in a TOML scene, e.g. \
+                mesh = \"named.obj\" with [materials.\"Ceiling Light\"] emission = [10, 10, 10] (radiance)";
+    assert!(e.contains(hint), "{e}");
+    let toml = write("named.toml", "mesh = \"named.obj\"\n[materials.\"Ceiling Light\"]\nemission = [10, 10, 10]\n");
+    let s = Scene::from_desc(scene::load(toml.to_str().unwrap()).unwrap()).unwrap();
+    s.check_emits().unwrap();
+    // No such name, no hint.
+    assert!(!load("dark.obj", &format!("{QUAD}f 1 2 3 4\n")).unwrap().check_emits().unwrap_err().to_string().contains("looks like"));
 }
 
 #[test]

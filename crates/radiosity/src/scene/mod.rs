@@ -654,7 +654,37 @@ impl Scene {
         } else {
             self.lost_light.join("; ")
         };
-        Err(Error::input(Location::file(&self.file), format!("no surface emits light: {why}")))
+        // Assets that name their light instead of giving it an emission (a glTF Cornell box
+        // whose material is called "light", an OBJ without Ke): say how to light it.
+        let mut used = vec![false; self.materials.len()];
+        for p in &self.polygons {
+            used[p.material as usize] = true;
+        }
+        let named: Vec<&str> = self
+            .materials
+            .iter()
+            .zip(&used)
+            .filter(|(m, u)| **u && !m.is_emitter())
+            .map(|(m, _)| m.name.as_str())
+            .filter(|n| ["light", "lamp", "emit", "emissive"].iter().any(|k| n.to_lowercase().contains(k)))
+            .take(3)
+            .collect();
+        let hint = match named.first() {
+            Some(first) => {
+                // A TOML bare key, or a quoted one.
+                let bare = first.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+                let first = if bare { first.to_string() } else { format!("{first:?}") };
+                let file = self.file.file_name().map_or("scene.obj".into(), |f| f.to_string_lossy().into_owned());
+                format!(
+                    "; {} look{} like a light: give {} an emission in a TOML scene, e.g. mesh = \"{file}\" with [materials.{first}] emission = [10, 10, 10] (radiance)",
+                    named.iter().map(|n| format!("material '{n}'")).collect::<Vec<_>>().join(", "),
+                    if named.len() == 1 { "s" } else { "" },
+                    if named.len() == 1 { "it" } else { "them" },
+                )
+            }
+            None => String::new(),
+        };
+        Err(Error::input(Location::file(&self.file), format!("no surface emits light: {why}{hint}")))
     }
 
     /// A textured channel of polygon `poly` at point `x`, filtered over `footprint` (scene
