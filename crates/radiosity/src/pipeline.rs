@@ -443,10 +443,7 @@ impl Prepared {
             &mut solution.energy,
         );
         let mut warnings = Vec::new();
-        if let Some(w) = crate::back_faces::warning(&self.scene, &loss, &solution.energy) {
-            progress.warning(&w);
-            warnings.push(w);
-        }
+        form_factor::push_warning(crate::back_faces::warning(&self.scene, &loss, &solution.energy), progress, &mut warnings);
         let cause = match (&self.transport, &self.ff_stats) {
             (_, Some(st)) if st.method == form_factor::Method::Analytic.name() => {
                 "analytic form factors ignore occlusion, so surfaces exchange light through what stands between them: \
@@ -463,22 +460,15 @@ impl Prepared {
             (None, None) => "the stochastic estimate is noisy: more --rays reduce it",
             _ => "the form factors are not reciprocal (A_i F_ij differs from A_j F_ji): a finer --mesh-size or more rays helps",
         };
-        if let Some(w) = crate::back_faces::created_warning(&solution.energy, cause) {
-            progress.warning(&w);
-            warnings.push(w);
-        }
-        if let Some(w) = crate::back_faces::two_sided_emitter_warning(&self.scene, &solution.energy) {
-            progress.warning(&w);
-            warnings.push(w);
-        }
+        form_factor::push_warning(crate::back_faces::created_warning(&solution.energy, cause), progress, &mut warnings);
+        form_factor::push_warning(crate::back_faces::two_sided_emitter_warning(&self.scene, &solution.energy), progress, &mut warnings);
         for l in self.scene.lights.iter().filter(|l| crate::lights::enclosed(&self.scene, &self.rays, l)) {
             let at = l.loc.as_ref().map_or(String::new(), |loc| format!("{loc}: "));
             let w = format!(
                 "{at}light '{}' is inside closed geometry (every ray from it meets the back of a surface): its light reaches no surface",
                 l.name
             );
-            progress.warning(&w);
-            warnings.push(w);
+            form_factor::push_warning(Some(w), progress, &mut warnings);
         }
         let t = Instant::now();
         let vertex_radiosity = reconstruct::vertex_radiosity(&self.scene, &self.mesh, &solution.display_radiosity());

@@ -93,7 +93,7 @@
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::accel::SceneRays;
@@ -277,6 +277,8 @@ struct Ctx<'a> {
     emits: Vec<bool>,
     /// Per node: some element emits.
     emits_any: Vec<bool>,
+    /// Per node that emits unequally: where its emitting elements lie and face.
+    lit: Vec<LitFaces>,
     /// Emission is concentrated (emitting elements cover under [`SHARP_EMITTERS`] of the
     /// area): then a node with an emitter never sends to a cluster receiver, since direct
     /// light needs surfaces to land on. Under emission spread over the scene (a furnace,
@@ -401,6 +403,7 @@ pub fn link(
         b_hat,
         emits_any: e_range.iter().map(|r| r.1 > 0.0).collect(),
         sharp: emitting_area < SHARP_EMITTERS * area,
+        lit: LitFaces::of_nodes(&tree, emission, &emits),
         emits,
         power_eps: opts.tolerance * total_power,
         eps,
@@ -674,6 +677,60 @@ fn separation_ratio(nr: &Node, ns: &Node) -> f64 {
 }
 
 /// Range of the signed distance of a box's corners from a plane.
+/// The emitting elements of a node: their bounding box and the cone of their normals.
+/// A cluster that emits unequally may still be a source for a receiver that lies in front
+/// of every one of its emitting elements: its directional reading then mixes only light
+/// the receiver could see (a sky-lit courtyard floor read from the galleries above it),
+/// while one whose emitting faces turn away from the receiver (the lit roof of a slab, read
+/// from the room below) must be split ([`Ctx::emits_unseen`]).
+#[derive(Clone, Copy, Debug)]
+struct LitFaces {
+    lo: Vec3,
+    hi: Vec3,
+    /// Area-weighted mean normal of the emitting elements.
+    axis: Vec3,
+    /// Cosine of the cone's half angle about `axis` (−2 when unknown or wider than 90°).
+    cos: f32,
+}
+
+impl LitFaces {
+    const NONE: LitFaces = LitFaces { lo: Vec3::ZERO, hi: Vec3::ZERO, axis: Vec3::ZERO, cos: -2.0 };
+
+    /// For every node flagged in `emits` (others get [`LitFaces::NONE`]): one pass over its
+    /// elements, O(n log n) over a balanced tree.
+    fn of_nodes(tree: &Tree, emission: &[Rgb], emits: &[bool]) -> Vec<LitFaces> {
+        (0..tree.nodes.len())
+            .into_par_iter()
+            .map(|k| {
+                if !emits[k] {
+                    return LitFaces::NONE;
+                }
+                let nd = &tree.nodes[k];
+                let ids = &tree.order[nd.first as usize..(nd.first + nd.count) as usize];
+                let leaves = || {
+                    ids.iter()
+                        .filter(|&&e| emission[e as usize].max_element() > 0.0)
+                        .map(|&e| &tree.nodes[tree.leaf_of[e as usize] as usize])
+                };
+                let (mut lo, mut hi, mut sum) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY), Vec3::ZERO);
+                for l in leaves() {
+                    lo = lo.min(l.lo);
+                    hi = hi.max(l.hi);
+                    sum += l.n_sum;
+                }
+                let axis = sum.normalize_or_zero();
+                if axis == Vec3::ZERO {
+                    return LitFaces::NONE;
+                }
+                let cos = leaves().map(|l| l.n_sum.normalize_or_zero().dot(axis)).fold(1.0f32, f32::min);
+                // Rounding of f32 normals: a cone a little wider than measured.
+                let cos = if cos > 1e-3 { (cos - 1e-4).min(1.0) } else { -2.0 };
+                LitFaces { lo, hi, axis, cos }
+            })
+            .collect()
+    }
+}
+
 fn box_plane_range(nd: &Node, p: DVec3, n: DVec3) -> (f64, f64) {
     let (lo, hi) = (nd.lo.as_dvec3(), nd.hi.as_dvec3());
     let c = 0.5 * (lo + hi) - p;
@@ -763,7 +820,7 @@ impl Ctx<'_> {
             // down to the minimum size: below it the point-by-point integral of a terminal
             // link drops what lies behind.
             let straddles = dmin < -tol && self.splittable(s);
-            if (straddles || (!ns.surface && self.emits[s as usize])) && !ns.is_leaf() {
+            if (straddles || (!ns.surface && self.emits_unseen(r, s))) && !ns.is_leaf() {
                 stack.push((r, ns.child[0]));
                 stack.push((r, ns.child[1]));
                 continue;
@@ -954,6 +1011,28 @@ impl Ctx<'_> {
         }
     }
 
+    /// True when source `s` emits unequally and some of its emitting elements may face away
+    /// from receiver `r` (see [`LitFaces`]). Conservative: every direction `v = x − p` from
+    /// a point `p` of the emitting box to a point `x` of `r`'s box must lie within 90° of
+    /// every normal of the cone, `v·a cos θ > |v| sin θ`, bounded over the box of all `v`.
+    fn emits_unseen(&self, r: u32, s: u32) -> bool {
+        if !self.emits[s as usize] {
+            return false;
+        }
+        let lit = &self.lit[s as usize];
+        if lit.cos <= 0.0 {
+            return true;
+        }
+        let nr = self.node(r);
+        let (vlo, vhi) = ((nr.lo - lit.hi).as_dvec3(), (nr.hi - lit.lo).as_dvec3());
+        let a = lit.axis.as_dvec3();
+        let min_dot: f64 = (0..3).map(|i| (vlo[i] * a[i]).min(vhi[i] * a[i])).sum();
+        let max_len = (0..3).map(|i| (vlo[i] * vlo[i]).max(vhi[i] * vhi[i])).sum::<f64>().sqrt();
+        let cos = lit.cos as f64;
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        !(min_dot * cos > max_len * sin + self.eps)
+    }
+
     /// True when node `k` may be split to refine a link: not a leaf, and larger than
     /// [`Options::min_size`] both across and in area (`min_size²`).
     #[inline]
@@ -992,7 +1071,7 @@ impl Ctx<'_> {
         // first-order directional reading mixes faces the receiver cannot see. Under a sky a
         // slab's lit roof and dark ceiling, read by a floor cluster inside, leaked light into
         // a closed room (max B 5.6e-2 against 1.58 outside; `tests/sky.rs`).
-        if !ns.surface && self.emits[s as usize] && !ns.is_leaf() {
+        if !ns.surface && self.emits_unseen(r, s) && !ns.is_leaf() {
             stack.push((r, ns.child[0]));
             stack.push((r, ns.child[1]));
             return;
@@ -1474,6 +1553,7 @@ mod tests {
             b_hat: vec![1.0; n],
             emits: vec![false; n],
             emits_any: vec![false; n],
+            lit: vec![LitFaces::NONE; n],
             sharp: true,
             power_eps: 0.0,
             eps: 1e-9,

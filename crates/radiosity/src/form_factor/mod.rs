@@ -410,7 +410,7 @@ fn guard_warning(guard: &RowGuard, progress: &dyn Progress, warnings: &mut Vec<S
 }
 
 /// Shows `w` (if any) and keeps it for the report.
-fn push_warning(w: Option<String>, progress: &dyn Progress, warnings: &mut Vec<String>) {
+pub(crate) fn push_warning(w: Option<String>, progress: &dyn Progress, warnings: &mut Vec<String>) {
     if let Some(w) = w {
         progress.warning(&w);
         warnings.push(w);
