@@ -291,9 +291,6 @@ fn run_inner(a: &ViewfactorsArgs) -> Result<ExitCode> {
         }
         (vf.diagnostics, vf.stats, comparison)
     };
-    for w in &stats.warnings {
-        eprintln!("warning: {w}");
-    }
     let seconds = t1.elapsed().as_secs_f64();
     if !a.quiet {
         summarize(&diagnostics, seconds, &stats);

@@ -252,3 +252,28 @@ fn thermal_in_bands_from_a_scene_and_the_command_line() {
     let (code, err) = run(&["thermal", scene, "--bands", "none", "-q"]);
     assert!(code != 0 && err.contains("no band edges"), "{err}");
 }
+
+/// A form-factor warning prints once, under `--quiet` too, and is kept in the report: the
+/// warnings print as they arise and were printed a second time at the end.
+#[test]
+fn a_warning_prints_once_and_is_kept_in_the_report() {
+    let (out, report) = (tmp("cornell-analytic.csv"), tmp("cornell-analytic.json"));
+    let (code, err) = run(&[
+        "viewfactors",
+        "cornell",
+        "--method",
+        "analytic",
+        "-o",
+        out.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let occlusion = "analytic form factors ignore occlusion";
+    assert_eq!(err.matches(occlusion).count(), 1, "{err}");
+    assert_eq!(err.matches("summed above 1 and were scaled").count(), 1, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let kept = v["form_factors"]["warnings"].as_array().unwrap();
+    assert!(kept.iter().any(|w| w.as_str().unwrap().contains(occlusion)), "{kept:?}");
+}
