@@ -683,7 +683,6 @@ fn separation_ratio(nr: &Node, ns: &Node) -> f64 {
     }
 }
 
-/// Range of the signed distance of a box's corners from a plane.
 /// The emitting elements of a node: their bounding box and the cone of their normals.
 /// A cluster that emits unequally may still be a source for a receiver that lies in front
 /// of every one of its emitting elements: its directional reading then mixes only light
@@ -738,6 +737,7 @@ impl LitFaces {
     }
 }
 
+/// Range of the signed distance of a box's corners from a plane.
 fn box_plane_range(nd: &Node, p: DVec3, n: DVec3) -> (f64, f64) {
     let (lo, hi) = (nd.lo.as_dvec3(), nd.hi.as_dvec3());
     let c = 0.5 * (lo + hi) - p;

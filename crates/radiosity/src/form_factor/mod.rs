@@ -423,8 +423,7 @@ fn warn_occlusion(scene: &Scene, progress: &dyn Progress, warnings: &mut Vec<Str
             "analytic form factors ignore occlusion, and this scene can occlude ({why}); \
              use adaptive, monte-carlo, point-sampled or hemicube for occluded factors"
         );
-        progress.warning(&w);
-        warnings.push(w);
+        push_warning(Some(w), progress, warnings);
     }
 }
 
