@@ -8,7 +8,8 @@
 # (least squares on log–log). Without EXTRA each k runs at its defaults (the mesh size
 # grows with the scene): the series from 10^4 to 10^6 triangles is
 #   scripts/bench-scaling.sh 1 2 4 7 11 The classroom's own mesh size (0.3853) and, as the link
-# minimum size, the same (the default above 50 000 elements) keep every k in one regime:
+# minimum size, the same (the default above 50 000 elements until 2026-12-05; now twice
+# the mesh size) keep every k in one regime:
 #   EXTRA="--mesh-size 0.3853 --link-min-size 0.3853" scripts/bench-scaling.sh 1 2 4 7 10
 # Needs ../shared beside the repository.
 # Usage: scripts/bench-scaling.sh [K...]   (after cargo build --release; default: 1 2 3 4;

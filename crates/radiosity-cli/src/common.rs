@@ -57,8 +57,8 @@ pub struct SolveFlags {
     #[arg(long)]
     pub no_cluster_receivers: bool,
     /// Hierarchical: nodes (groups of elements) whose bounding-box diagonal is at most
-    /// this are not split to refine a link; 0 refines down to the elements [default: the
-    /// mesh size].
+    /// this are not split to refine a link; 0 refines down to the elements [default: twice
+    /// the mesh size above 50 000 elements, else 0].
     #[arg(long, value_name = "S")]
     pub link_min_size: Option<f64>,
     /// Hierarchical: emitted light goes through the links too; by default a scene with

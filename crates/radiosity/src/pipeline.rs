@@ -240,15 +240,28 @@ fn prepare(
     Ok((prepared.with_factors(settings, form_factors, progress)?, refiner))
 }
 
-/// The minimum node size hierarchical links are refined to: the given one, else the mesh
-/// size above [`transport::AUTO_ELEMENTS`] elements (where refining every pair down to the
-/// elements costs minutes: the conference room's 694 163 elements take 730 s of links at
-/// 0, 27 s at the mesh size, for the same image error), else 0 (every pair down to the
-/// elements: the classroom's per-object median error is 3.8 % at 0 and 6.8 % at the mesh
-/// size, where its furniture exchanges light as whole clusters).
+/// The minimum node size hierarchical links are refined to: the given one, else
+/// [`LINK_MIN_SIZE_PER_MESH_SIZE`] × the mesh size above [`transport::AUTO_ELEMENTS`]
+/// elements (where refining every pair down to the elements costs minutes: the conference
+/// room's 694 163 elements take 730 s of links at 0, 27 s at the mesh size, for the same
+/// image error), else 0 (every pair down to the elements: the classroom's per-object median
+/// error is 3.8 % at 0 and 6.8 % at the mesh size, where its furniture exchanges light as
+/// whole clusters).
 pub fn link_min_size(settings: &Settings, mesh: &Mesh) -> f64 {
-    settings.links.min_size.unwrap_or(if mesh.len() as u64 > transport::AUTO_ELEMENTS { mesh.target_size } else { 0.0 })
+    settings.links.min_size.unwrap_or(if mesh.len() as u64 > transport::AUTO_ELEMENTS {
+        LINK_MIN_SIZE_PER_MESH_SIZE * mesh.target_size
+    } else {
+        0.0
+    })
 }
+
+/// The default minimum link size over the mesh size, for scenes above
+/// [`transport::AUTO_ELEMENTS`] elements. At 2 (measured 2026-12-05, BENCHMARKS "Eighth
+/// round"): Sponza under the sky renders in 45 s instead of 84 s, the conference room in
+/// 37 s instead of 54 s, with the same image errors (courtyard 3.33 % / 3.36 %, gallery
+/// 11.42 % / 11.74 %, conference 3.41 % / 3.48 %); at 3 Sponza's per-object median error
+/// grows to 4.68 % (4.19 % at 1, 4.33 % at 2).
+pub const LINK_MIN_SIZE_PER_MESH_SIZE: f64 = 2.0;
 
 /// The error for a mesh size whose uniform mesh has `count` elements, over `limit`: the
 /// smallest size that meets the limit (found by bisection on the count, printed rounded up

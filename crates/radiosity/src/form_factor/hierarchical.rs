@@ -119,8 +119,9 @@ pub struct Options {
     pub cluster_receivers: bool,
     /// Nodes whose bounding-box diagonal is at most this (scene units) are not split to
     /// refine a link (Hanrahan et al.'s `A_ε`): two such nodes that are not well separated
-    /// are linked as they are. 0: refine down to the elements. The pipeline sets it to the
-    /// mesh size when it is `None`, so the elements of large surfaces stay leaves while a
+    /// are linked as they are. 0: refine down to the elements. The pipeline sets it to
+    /// twice the mesh size above 50 000 elements when it is `None`
+    /// (`crate::pipeline::link_min_size`), so the elements of large surfaces stay leaves while a
     /// chair's many small polygons exchange light with the room as a whole ([`link`] alone
     /// takes `None` as 0).
     pub min_size: Option<f64>,
