@@ -501,7 +501,12 @@ pub fn link(
     // direct columns carry it, or where emission is spread (a furnace, a glowing wall).
     let traced = emitters.is_some() || !ctx.sharp;
     drop(ctx);
+    // Its own stage in the report: seconds on a large scene (the links into one array, the
+    // closure fit and the row guard, each a pass over every link).
+    progress.begin("link assembly", 1);
     let mut h = Hierarchy::from_parts(tree, parts, direct_rows, closure, stats);
+    progress.advance(1);
+    progress.end();
     if let Some(fraction) = h.closure().map(|c| &c.fraction).filter(|_| traced) {
         // Elements whose rows fall far short of their closure gather by rays instead.
         let sums = h.row_sums();
@@ -540,7 +545,10 @@ pub fn link(
             if stopped.load(Ordering::Relaxed) {
                 return Err(Error::Cancelled);
             }
+            progress.begin("row refit", 1);
             h.set_ray_rows(rows);
+            progress.advance(1);
+            progress.end();
         }
     }
     Ok((h, total_rays.load(Ordering::Relaxed)))
