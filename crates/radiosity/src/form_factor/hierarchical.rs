@@ -505,7 +505,6 @@ pub fn link(
     // closure fit and the row guard, each a pass over every link).
     progress.begin("link assembly", 1);
     let mut h = Hierarchy::from_parts(tree, parts, direct_rows, closure, stats);
-    progress.advance(1);
     progress.end();
     if let Some(fraction) = h.closure().map(|c| &c.fraction).filter(|_| traced) {
         // Elements whose rows fall far short of their closure gather by rays instead.
@@ -547,7 +546,6 @@ pub fn link(
             }
             progress.begin("row refit", 1);
             h.set_ray_rows(rows);
-            progress.advance(1);
             progress.end();
         }
     }
