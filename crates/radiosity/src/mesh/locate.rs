@@ -125,6 +125,12 @@ impl Locator {
     /// The element of `patch` containing `p` (or the nearest, for points a rounding error
     /// outside every element).
     pub fn locate(&self, mesh: &Mesh, patch: u32, p: DVec3) -> u32 {
+        let pe = mesh.patches[patch as usize];
+        if pe.count == 1 {
+            // The only candidate (the test below would return it too): most polygons of a
+            // detailed model are one element, and this skips the grid's cache misses.
+            return pe.first;
+        }
         let g = &self.patches[patch as usize];
         let to2 = |q: DVec3| DVec2::new((q - g.origin).dot(g.axes.0), (q - g.origin).dot(g.axes.1));
         let q = to2(p);
@@ -132,7 +138,6 @@ impl Locator {
         let (x, y) = ((c.x.max(0.0) as usize).min(g.nx - 1), (c.y.max(0.0) as usize).min(g.ny - 1));
         let cell = y * g.nx + x;
         let candidates = &g.items[g.cell_start[cell] as usize..g.cell_start[cell + 1] as usize];
-        let pe = mesh.patches[patch as usize];
         let all: Vec<u32>;
         let candidates = if candidates.is_empty() {
             all = (pe.first..pe.first + pe.count).collect();

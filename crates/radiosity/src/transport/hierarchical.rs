@@ -141,6 +141,14 @@ pub struct Tree {
     pub normal_bins_exposed: Vec<Vec3>,
     /// Prefix sums of the exposed areas in tree order, for sampling a cluster by them.
     pub exposed_prefix: Vec<f64>,
+    /// The topmost surface nodes (surface nodes below no other), in tree order, as their
+    /// normal sums `n_sum` and `n_x`: node `k`'s are `top_n[top_range[k][0] ..
+    /// top_range[k][1]]`, a contiguous run (see [`Tree::front_area`]).
+    pub top_n: Vec<Vec3>,
+    /// The same with `n_x` (exposed).
+    pub top_nx: Vec<Vec3>,
+    /// Per node: its run of topmost surface nodes.
+    pub top_range: Vec<[u32; 2]>,
 }
 
 /// Elements of one plane share a key: normal and offset quantised.
@@ -406,6 +414,45 @@ impl Tree {
         self.normal_start = start;
         self.normal_bins = bins;
         self.normal_bins_exposed = exposed;
+        self.index_surfaces();
+    }
+
+    /// [`Tree::top_n`], [`Tree::top_nx`] and [`Tree::top_range`]: the topmost surface nodes
+    /// in tree order (depth first, first child first, so every node's lie in one run).
+    fn index_surfaces(&mut self) {
+        let nodes = &self.nodes;
+        let (mut top_n, mut top_nx) = (Vec::new(), Vec::new());
+        let mut range = vec![[0u32; 2]; nodes.len()];
+        let mut stack = if nodes.is_empty() { Vec::new() } else { vec![0u32] };
+        while let Some(k) = stack.pop() {
+            let nd = &nodes[k as usize];
+            if nd.surface {
+                let i = top_n.len() as u32;
+                range[k as usize] = [i, i + 1];
+                top_n.push(nd.n_sum);
+                top_nx.push(nd.n_x);
+            } else {
+                stack.extend(nd.child.iter().rev().filter(|&&c| c != NONE));
+            }
+        }
+        // Clusters, bottom-up (children come after parents): the union of their children's
+        // runs, which are adjacent. Surface nodes below a topmost one keep their own run
+        // (front_area reads a surface node directly).
+        for k in (0..nodes.len()).rev() {
+            let nd = &nodes[k];
+            if nd.surface {
+                continue;
+            }
+            let mut r = [u32::MAX, 0];
+            for c in nd.child.into_iter().filter(|&c| c != NONE) {
+                let rc = range[c as usize];
+                r = [r[0].min(rc[0]), r[1].max(rc[1])];
+            }
+            range[k] = if r[0] <= r[1] { r } else { [0, 0] };
+        }
+        self.top_n = top_n;
+        self.top_nx = top_nx;
+        self.top_range = range;
     }
 
     /// `Σ_j A_j max(0, n_j·d)`: the projected area of node `k`'s front faces towards the unit
@@ -440,17 +487,14 @@ impl Tree {
     /// cluster receiver hands out per unit of a link from `d`). [`Tree::projected_area`] is
     /// the constant-time estimate.
     pub fn front_area(&self, k: u32, d: DVec3, exposed: bool) -> f64 {
-        let mut total = 0.0;
-        let mut stack = vec![k];
-        while let Some(k) = stack.pop() {
-            let nd = &self.nodes[k as usize];
-            if nd.surface {
-                total += if exposed { nd.n_x } else { nd.n_sum }.as_dvec3().dot(d).max(0.0);
-            } else {
-                stack.extend(nd.child.iter().filter(|&&c| c != NONE));
-            }
+        let nd = &self.nodes[k as usize];
+        if nd.surface {
+            return if exposed { nd.n_x } else { nd.n_sum }.as_dvec3().dot(d).max(0.0);
         }
-        total
+        // The topmost surface nodes below k, one contiguous run.
+        let [a, b] = self.top_range[k as usize];
+        let run = if exposed { &self.top_nx[a as usize..b as usize] } else { &self.top_n[a as usize..b as usize] };
+        run.iter().map(|m| m.as_dvec3().dot(d).max(0.0)).sum()
     }
 
     /// The element at area fraction `u ∈ [0, 1)` of node `k` (area-uniform choice).
@@ -707,13 +751,24 @@ const PARALLEL_WALK: usize = 4096;
 
 /// What links read from their sources during one product (pulled per node).
 struct Sources<'a> {
+    /// Area-weighted mean radiosity (what a surface source gives).
     mean: &'a [Rgb],
-    /// `Σ A_j o_j B_j`, the exposed sum (a cluster is read through its exposed faces).
-    sx: &'a [Rgb],
-    nb: &'a [[DVec3; 3]],
-    /// `Σ A_j o_j B_j n_j` (far links' directional readings; `nb` is `Σ A_j B_j n_j`).
-    nbx: &'a [[DVec3; 3]],
-    hi: &'a [Rgb],
+    /// Per node, what a cluster's directional reading needs ([`Read`]): for near links
+    /// (every face) and for far links (the exposed faces), one record each so that a link
+    /// reads its source from one place.
+    reads: &'a [[Read; 2]],
+}
+
+/// A cluster's directional reading for one kind of link: `mean · w₀ + β · n`, held to
+/// `[0, hi]` (see [`Hierarchy::source_value`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Read {
+    /// The mean radiosity (over every face for near links, the exposed ones for far links).
+    mean: Rgb,
+    /// `Σ A_j B_j n_j` per channel (with the exposure `o_j` for far links).
+    n: [DVec3; 3],
+    /// The largest radiosity below the node.
+    hi: Rgb,
 }
 
 impl Hierarchy {
@@ -988,45 +1043,58 @@ impl Hierarchy {
     fn apply(&self, x: &[Rgb], y: &mut [Rgb], guard: bool, direct: bool) {
         let nodes = &self.tree.nodes;
         let m = nodes.len();
-        // Pull: area-weighted means and N_B = Σ A B n (per channel), bottom-up.
+        // Pull: area-weighted means and N_B = Σ A B n (per channel), bottom-up, into each
+        // node's near record; its far record holds `Σ A_j o_j B_j` and `Σ A_j o_j B_j n_j`,
+        // divided by the exposed area once the pull is done.
         let mut mean = vec![Rgb::ZERO; m];
-        let mut nb = vec![[DVec3::ZERO; 3]; m];
-        let mut nbx = vec![[DVec3::ZERO; 3]; m];
-        let mut sx = vec![Rgb::ZERO; m];
-        // And the largest value below each node, which bounds a directional reading.
-        let mut hi = vec![Rgb::ZERO; m];
+        let mut reads = vec![[Read::default(); 2]; m];
         for k in (0..m).rev() {
             let nd = &nodes[k];
             mean[k] = if nd.is_leaf() {
                 let v = x[self.tree.order[nd.first as usize] as usize];
                 let n = nd.n_sum.as_dvec3();
-                nb[k] = [n * v.x, n * v.y, n * v.z];
-                let n = nd.n_x.as_dvec3();
-                nbx[k] = [n * v.x, n * v.y, n * v.z];
-                sx[k] = v * nd.area_x as f64;
-                hi[k] = v;
+                let nx = nd.n_x.as_dvec3();
+                // And the largest value below each node, which bounds a directional reading.
+                reads[k] = [
+                    Read { mean: v, n: [n * v.x, n * v.y, n * v.z], hi: v },
+                    Read { mean: v * nd.area_x as f64, n: [nx * v.x, nx * v.y, nx * v.z], hi: v },
+                ];
                 v
             } else {
                 let (c0, c1) = (nd.child[0] as usize, nd.child[1] as usize);
-                nb[k] = [nb[c0][0] + nb[c1][0], nb[c0][1] + nb[c1][1], nb[c0][2] + nb[c1][2]];
-                nbx[k] = [nbx[c0][0] + nbx[c1][0], nbx[c0][1] + nbx[c1][1], nbx[c0][2] + nbx[c1][2]];
-                sx[k] = sx[c0] + sx[c1];
-                hi[k] = hi[c0].max(hi[c1]);
-                let (a, b) = (&nodes[nd.child[0] as usize], &nodes[nd.child[1] as usize]);
+                let (r0, r1) = (reads[c0], reads[c1]);
+                let add = |a: &Read, b: &Read| [a.n[0] + b.n[0], a.n[1] + b.n[1], a.n[2] + b.n[2]];
+                let hi = r0[0].hi.max(r1[0].hi);
+                reads[k] = [
+                    Read { mean: Rgb::ZERO, n: add(&r0[0], &r1[0]), hi },
+                    Read { mean: r0[1].mean + r1[1].mean, n: add(&r0[1], &r1[1]), hi },
+                ];
+                let (a, b) = (&nodes[c0], &nodes[c1]);
                 let area = a.area as f64 + b.area as f64;
                 if area > 0.0 {
-                    (mean[nd.child[0] as usize] * a.area as f64 + mean[nd.child[1] as usize] * b.area as f64) / area
+                    (mean[c0] * a.area as f64 + mean[c1] * b.area as f64) / area
                 } else {
                     Rgb::ZERO
                 }
             };
         }
+        // The records' means: far links read a cluster's exposed faces, `Σ A_j o_j B_j /
+        // Σ A_j o_j`, or all of it when nothing is exposed.
+        reads.par_iter_mut().enumerate().with_min_len(1024).for_each(|(k, r)| {
+            r[0].mean = mean[k];
+            let ax = nodes[k].area_x as f64;
+            if ax > 0.0 {
+                r[1].mean = r[1].mean / ax;
+            } else {
+                r[1] = r[0];
+            }
+        });
         // Gather per receiver node: irradiance at its centroid and its gradient (one
         // spatial vector per colour channel).
         // A cluster receiver holds its irradiance as a function of the normal instead,
         // `s + L·n + nᵀQn` per channel (s in the scalar, L in the gradient slots, Q here).
         let mut g: Vec<(Rgb, [DVec3; 3])> = vec![(Rgb::ZERO, [DVec3::ZERO; 3]); m];
-        let src = Sources { mean: &mean, sx: &sx, nb: &nb, nbx: &nbx, hi: &hi };
+        let src = Sources { mean: &mean, reads: &reads };
         g.par_iter_mut().enumerate().with_min_len(256).for_each(|(k, gk)| {
             if !nodes[k].surface {
                 return; // cluster receivers below
@@ -1085,7 +1153,7 @@ impl Hierarchy {
         // and normal-dependent pushes extrapolate, so rows that sum to one can still
         // amplify a non-uniform `x` slightly; with the cap ‖F·x‖∞ ≤ ‖x‖∞ holds and
         // Jacobi stays below E/(1 − ρ)).
-        let top = hi.first().copied().unwrap_or(Rgb::ZERO);
+        let top = reads.first().map_or(Rgb::ZERO, |r| r[0].hi);
         y.par_iter_mut().enumerate().with_min_len(256).for_each(|(e, ye)| {
             *ye *= self.link_scale[e] as f64;
             if let Some(d) = self.direct.as_ref().filter(|_| direct) {
@@ -1196,24 +1264,18 @@ impl Hierarchy {
     fn source_value(&self, k: usize, t: usize, src: &Sources) -> Rgb {
         let s = self.link_src[t] as usize;
         let dir = self.read_of(k, t);
-        let hi = src.hi;
         if dir == Link::MEAN {
             src.mean[s]
         } else {
-            let ax = self.tree.nodes[s].area_x as f64;
-            let (mean, nb) = if self.is_near(t) || !(ax > 0.0) {
-                (src.mean[s], src.nb)
-            } else {
-                (src.sx[s] / ax, src.nbx)
-            };
+            let r = &src.reads[s][!self.is_near(t) as usize];
             let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
-            let n = &nb[s];
+            let n = &r.n;
             // A weighted mean of the source's radiosities in truth; the first-order reading
             // can overshoot (normals that cancel, as on two-sided pairs) and is held to
             // the range they span, so that no link amplifies.
-            (mean * dir[0] as f64 + Rgb::new(beta.dot(n[0]), beta.dot(n[1]), beta.dot(n[2])))
+            (r.mean * dir[0] as f64 + Rgb::new(beta.dot(n[0]), beta.dot(n[1]), beta.dot(n[2])))
                 .max(Rgb::ZERO)
-                .min(hi[s])
+                .min(r.hi)
         }
     }
 
@@ -1324,7 +1386,8 @@ impl Transport for Hierarchy {
             + (t.order.len() + t.leaf_of.len()) * 4
             + (t.area_prefix.len() + t.exposed_prefix.len()) * 8
             + t.normal_start.len() * 4
-            + (t.normal_bins.len() + t.normal_bins_exposed.len()) * 12
+            + (t.normal_bins.len() + t.normal_bins_exposed.len() + t.top_n.len() + t.top_nx.len()) * 12
+            + t.top_range.len() * 8
             + self.link_start.len() * 4
             + self.link_src.len() * 4
             + self.link_f.len() * 4
