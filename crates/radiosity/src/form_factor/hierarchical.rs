@@ -268,8 +268,41 @@ const SOURCE_FRONTIER: usize = 8;
 /// Receiver frontier size (points of a receiver node above the leaves).
 const RECEIVER_FRONTIER: usize = 4;
 
+/// An element as the rays of [`Ctx::visibility`] and [`Ctx::terminal_factor_with`] sample
+/// it: corners, normal and polygon in one record, in tree order ([`Tree::slot_at`]), so a
+/// sample costs two cache lines instead of the element, its vertices and the order.
+#[derive(Clone, Copy, Debug)]
+#[repr(align(64))]
+struct Sample {
+    corners: [DVec3; 4],
+    normal: DVec3,
+    patch: u32,
+    quad: bool,
+}
+
+impl Sample {
+    fn of_tree(tree: &Tree, mesh: &Mesh) -> Vec<Sample> {
+        tree.order
+            .par_iter()
+            .map(|&e| {
+                let el = &mesh.elements[e as usize];
+                let (corners, n) = el.corners(&mesh.positions);
+                Sample { corners, normal: el.normal, patch: el.patch, quad: n == 4 }
+            })
+            .collect()
+    }
+
+    /// [`crate::mesh::Element::point`].
+    #[inline]
+    fn point(&self, u: f64, v: f64) -> DVec3 {
+        crate::mesh::point_on(&self.corners, self.quad, u, v)
+    }
+}
+
 struct Ctx<'a> {
     tree: &'a Tree,
+    /// Every element's [`Sample`], in tree order.
+    samples: Vec<Sample>,
     mesh: &'a Mesh,
     rays: &'a SceneRays,
     receivers: &'a Receivers,
@@ -401,6 +434,7 @@ pub fn link(
         && emitting.len() * 16 <= n)
         .then_some(emitting);
     let ctx = Ctx {
+        samples: Sample::of_tree(&tree, mesh),
         tree: &tree,
         mesh,
         rays,
@@ -1205,17 +1239,15 @@ impl Ctx<'_> {
         sc: &mut Scratch,
     ) -> (f64, DVec3) {
         use rand::RngExt;
-        let mesh = self.mesh;
         let a_s = self.node(s).area as f64;
         let disk = a_s / m as f64;
         sc.pairs.clear();
         for t in 0..m {
             let ur = (t as f64 + rng.random::<f64>()) / m as f64;
             let us = ((t * 7 + 3) % m) as f64 / m as f64 + rng.random::<f64>() / m as f64;
-            let (ei, ej) = (self.tree.element_at(r, ur), self.tree.element_at(s, us));
-            let (a, b) = (&mesh.elements[ei as usize], &mesh.elements[ej as usize]);
-            let x = a.point(&mesh.positions, rng.random(), rng.random());
-            let y = b.point(&mesh.positions, rng.random(), rng.random());
+            let (a, b) = (&self.samples[self.tree.slot_at(r, ur)], &self.samples[self.tree.slot_at(s, us)]);
+            let x = a.point(rng.random(), rng.random());
+            let y = b.point(rng.random(), rng.random());
             sc.pairs.push(((x, a.normal, a.patch), (y, b.normal, b.patch)));
         }
         let kernel = |x: DVec3, nx: DVec3, y: DVec3, ny: DVec3| {
@@ -1367,17 +1399,15 @@ impl Ctx<'_> {
         use rand::RngExt;
         let m = if minor { self.opts.visibility_rays.div_ceil(2) } else { self.opts.visibility_rays };
         let (mut valid, mut seen) = (0u32, 0u32);
-        let mesh = self.mesh;
         // Clusters of a far pair by their exposed area: their projected areas leave out
         // faces that no far node sees, so the rays test what lies between the nodes.
-        let pick = |k: u32, u: f64| if near { self.tree.element_at(k, u) } else { self.tree.element_at_exposed(k, u) };
+        let pick = |k: u32, u: f64| &self.samples[if near { self.tree.slot_at(k, u) } else { self.tree.slot_at_exposed(k, u) }];
         for t in 0..m {
             let ur = (t as f64 + rng.random::<f64>()) / m as f64;
             let us = ((t * 7 + 3) % m) as f64 / m as f64 + rng.random::<f64>() / m as f64;
-            let (ei, ej) = (pick(r, ur), pick(s, us));
-            let (a, b) = (&mesh.elements[ei as usize], &mesh.elements[ej as usize]);
-            let x = a.point(&mesh.positions, rng.random(), rng.random());
-            let y = b.point(&mesh.positions, rng.random(), rng.random());
+            let (a, b) = (pick(r, ur), pick(s, us));
+            let x = a.point(rng.random(), rng.random());
+            let y = b.point(rng.random(), rng.random());
             if a.normal.dot(y - x) <= 0.0 || b.normal.dot(x - y) <= 0.0 {
                 continue;
             }
@@ -1581,6 +1611,7 @@ mod tests {
         let opts = Options::default();
         let ff = super::super::Options::default();
         let ctx = Ctx {
+            samples: Sample::of_tree(&tree, &mesh),
             tree: &tree,
             mesh: &mesh,
             rays: &rays,

@@ -42,6 +42,20 @@ pub struct Element {
     pub normal: DVec3,
 }
 
+/// The point at `(u, v) ∈ [0,1]²` of a quad (bilinear) or triangle (`c[0..3]`, area-uniform
+/// for uniform `(u, v)`): [`Element::point`] on corners already loaded.
+#[inline]
+pub fn point_on(c: &[DVec3; 4], quad: bool, u: f64, v: f64) -> DVec3 {
+    if quad {
+        let a = c[0].lerp(c[1], u);
+        let b = c[3].lerp(c[2], u);
+        a.lerp(b, v)
+    } else {
+        let su = u.sqrt();
+        c[0] * (1.0 - su) + c[1] * (su * (1.0 - v)) + c[2] * (su * v)
+    }
+}
+
 impl Element {
     /// 3 or 4.
     #[inline]
@@ -70,14 +84,7 @@ impl Element {
     #[inline]
     pub fn point(&self, positions: &[DVec3], u: f64, v: f64) -> DVec3 {
         let (c, n) = self.corners(positions);
-        if n == 4 {
-            let a = c[0].lerp(c[1], u);
-            let b = c[3].lerp(c[2], u);
-            a.lerp(b, v)
-        } else {
-            let su = u.sqrt();
-            c[0] * (1.0 - su) + c[1] * (su * (1.0 - v)) + c[2] * (su * v)
-        }
+        point_on(&c, n == 4, u, v)
     }
 
     /// The (u, v) ∈ [0,1]² of a point on (or projected onto) the element: the inverse of

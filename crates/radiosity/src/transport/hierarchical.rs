@@ -500,28 +500,40 @@ impl Tree {
     /// The element at area fraction `u ∈ [0, 1)` of node `k` (area-uniform choice).
     #[inline]
     pub fn element_at(&self, k: u32, u: f64) -> u32 {
-        self.element_by(&self.area_prefix, k, u)
+        self.order[self.slot_at(k, u)]
     }
 
-    /// The element at fraction `u` of node `k`'s share of the prefix sums `p` (tree order).
+    /// [`Tree::element_at`] as a position in [`Tree::order`] (for data kept in tree order).
     #[inline]
-    fn element_by(&self, p: &[f64], k: u32, u: f64) -> u32 {
+    pub fn slot_at(&self, k: u32, u: f64) -> usize {
+        self.slot_by(&self.area_prefix, k, u)
+    }
+
+    /// The position in tree order at fraction `u` of node `k`'s share of the prefix sums `p`.
+    #[inline]
+    fn slot_by(&self, p: &[f64], k: u32, u: f64) -> usize {
         let nd = &self.nodes[k as usize];
         let (a, b) = (nd.first as usize, (nd.first + nd.count) as usize);
         let target = p[a] + u * (p[b] - p[a]);
         let slot = p[a + 1..=b].partition_point(|&x| x <= target);
-        self.order[(a + slot).min(b - 1)]
+        (a + slot).min(b - 1)
     }
 
     /// The element at fraction `u ∈ [0, 1)` of node `k`'s exposed area (area-uniform for a
     /// surface node; falls back to the open area where nothing is exposed).
     #[inline]
     pub fn element_at_exposed(&self, k: u32, u: f64) -> u32 {
+        self.order[self.slot_at_exposed(k, u)]
+    }
+
+    /// [`Tree::element_at_exposed`] as a position in [`Tree::order`].
+    #[inline]
+    pub fn slot_at_exposed(&self, k: u32, u: f64) -> usize {
         let nd = &self.nodes[k as usize];
         if nd.surface || !(nd.area_x > 0.0) {
-            return self.element_at(k, u);
+            return self.slot_at(k, u);
         }
-        self.element_by(&self.exposed_prefix, k, u)
+        self.slot_by(&self.exposed_prefix, k, u)
     }
 
     /// Up to `k` nodes that cover node `node` (descending into the largest first): a
