@@ -230,7 +230,8 @@ pub fn link_nodes(tree: &Tree, min_size: f64) -> u64 {
 /// before the coverage test; close enough for a bound) with links refined down to
 /// `min_size` at `separation`: links (36 bytes each while the refinement tasks hold them,
 /// then about 16 stored: source, factor and, where they exist, gradient or direction and a
-/// cluster's reading), the tree and the solver's per-node buffers, and direct columns to
+/// cluster's reading), the tree and the solver's per-node buffers, the sample record of
+/// every element, and direct columns to
 /// `emitters` (at most [`PREDICTED_DIRECT_PER_ELEMENT`] per element). Checked against the
 /// memory limit before the coverage test and links.
 pub fn predict_memory(tree: &Tree, min_size: f64, separation: f64, emitters: u64) -> u64 {
@@ -243,7 +244,9 @@ pub fn predict_memory(tree: &Tree, min_size: f64, separation: f64, emitters: u64
     } else {
         0.0
     };
-    (links * (36.0 + 16.0) + elements * 2.0 * node + direct) as u64
+    // The links' sample records ([`Sample`]) live while the links are refined.
+    let samples = elements * std::mem::size_of::<Sample>() as f64;
+    (links * (36.0 + 16.0) + elements * 2.0 * node + samples + direct) as u64
 }
 
 /// Share of the area below which emitting elements count as concentrated
