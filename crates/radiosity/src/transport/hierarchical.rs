@@ -763,24 +763,13 @@ const PARALLEL_WALK: usize = 4096;
 
 /// What links read from their sources during one product (pulled per node).
 struct Sources<'a> {
-    /// Area-weighted mean radiosity (what a surface source gives).
     mean: &'a [Rgb],
-    /// Per node, what a cluster's directional reading needs ([`Read`]): for near links
-    /// (every face) and for far links (the exposed faces), one record each so that a link
-    /// reads its source from one place.
-    reads: &'a [[Read; 2]],
-}
-
-/// A cluster's directional reading for one kind of link: `mean · w₀ + β · n`, held to
-/// `[0, hi]` (see [`Hierarchy::source_value`]).
-#[derive(Clone, Copy, Debug, Default)]
-struct Read {
-    /// The mean radiosity (over every face for near links, the exposed ones for far links).
-    mean: Rgb,
-    /// `Σ A_j B_j n_j` per channel (with the exposure `o_j` for far links).
-    n: [DVec3; 3],
-    /// The largest radiosity below the node.
-    hi: Rgb,
+    /// `Σ A_j o_j B_j`, the exposed sum (a cluster is read through its exposed faces).
+    sx: &'a [Rgb],
+    nb: &'a [[DVec3; 3]],
+    /// `Σ A_j o_j B_j n_j` (far links' directional readings; `nb` is `Σ A_j B_j n_j`).
+    nbx: &'a [[DVec3; 3]],
+    hi: &'a [Rgb],
 }
 
 impl Hierarchy {
@@ -1055,58 +1044,45 @@ impl Hierarchy {
     fn apply(&self, x: &[Rgb], y: &mut [Rgb], guard: bool, direct: bool) {
         let nodes = &self.tree.nodes;
         let m = nodes.len();
-        // Pull: area-weighted means and N_B = Σ A B n (per channel), bottom-up, into each
-        // node's near record; its far record holds `Σ A_j o_j B_j` and `Σ A_j o_j B_j n_j`,
-        // divided by the exposed area once the pull is done.
+        // Pull: area-weighted means and N_B = Σ A B n (per channel), bottom-up.
         let mut mean = vec![Rgb::ZERO; m];
-        let mut reads = vec![[Read::default(); 2]; m];
+        let mut nb = vec![[DVec3::ZERO; 3]; m];
+        let mut nbx = vec![[DVec3::ZERO; 3]; m];
+        let mut sx = vec![Rgb::ZERO; m];
+        // And the largest value below each node, which bounds a directional reading.
+        let mut hi = vec![Rgb::ZERO; m];
         for k in (0..m).rev() {
             let nd = &nodes[k];
             mean[k] = if nd.is_leaf() {
                 let v = x[self.tree.order[nd.first as usize] as usize];
                 let n = nd.n_sum.as_dvec3();
-                let nx = nd.n_x.as_dvec3();
-                // And the largest value below each node, which bounds a directional reading.
-                reads[k] = [
-                    Read { mean: v, n: [n * v.x, n * v.y, n * v.z], hi: v },
-                    Read { mean: v * nd.area_x as f64, n: [nx * v.x, nx * v.y, nx * v.z], hi: v },
-                ];
+                nb[k] = [n * v.x, n * v.y, n * v.z];
+                let n = nd.n_x.as_dvec3();
+                nbx[k] = [n * v.x, n * v.y, n * v.z];
+                sx[k] = v * nd.area_x as f64;
+                hi[k] = v;
                 v
             } else {
                 let (c0, c1) = (nd.child[0] as usize, nd.child[1] as usize);
-                let (r0, r1) = (reads[c0], reads[c1]);
-                let add = |a: &Read, b: &Read| [a.n[0] + b.n[0], a.n[1] + b.n[1], a.n[2] + b.n[2]];
-                let hi = r0[0].hi.max(r1[0].hi);
-                reads[k] = [
-                    Read { mean: Rgb::ZERO, n: add(&r0[0], &r1[0]), hi },
-                    Read { mean: r0[1].mean + r1[1].mean, n: add(&r0[1], &r1[1]), hi },
-                ];
-                let (a, b) = (&nodes[c0], &nodes[c1]);
+                nb[k] = [nb[c0][0] + nb[c1][0], nb[c0][1] + nb[c1][1], nb[c0][2] + nb[c1][2]];
+                nbx[k] = [nbx[c0][0] + nbx[c1][0], nbx[c0][1] + nbx[c1][1], nbx[c0][2] + nbx[c1][2]];
+                sx[k] = sx[c0] + sx[c1];
+                hi[k] = hi[c0].max(hi[c1]);
+                let (a, b) = (&nodes[nd.child[0] as usize], &nodes[nd.child[1] as usize]);
                 let area = a.area as f64 + b.area as f64;
                 if area > 0.0 {
-                    (mean[c0] * a.area as f64 + mean[c1] * b.area as f64) / area
+                    (mean[nd.child[0] as usize] * a.area as f64 + mean[nd.child[1] as usize] * b.area as f64) / area
                 } else {
                     Rgb::ZERO
                 }
             };
         }
-        // The records' means: far links read a cluster's exposed faces, `Σ A_j o_j B_j /
-        // Σ A_j o_j`, or all of it when nothing is exposed.
-        reads.par_iter_mut().enumerate().with_min_len(1024).for_each(|(k, r)| {
-            r[0].mean = mean[k];
-            let ax = nodes[k].area_x as f64;
-            if ax > 0.0 {
-                r[1].mean = r[1].mean / ax;
-            } else {
-                r[1] = r[0];
-            }
-        });
         // Gather per receiver node: irradiance at its centroid and its gradient (one
         // spatial vector per colour channel).
         // A cluster receiver holds its irradiance as a function of the normal instead,
         // `s + L·n + nᵀQn` per channel (s in the scalar, L in the gradient slots, Q here).
         let mut g: Vec<(Rgb, [DVec3; 3])> = vec![(Rgb::ZERO, [DVec3::ZERO; 3]); m];
-        let src = Sources { mean: &mean, reads: &reads };
+        let src = Sources { mean: &mean, sx: &sx, nb: &nb, nbx: &nbx, hi: &hi };
         g.par_iter_mut().enumerate().with_min_len(256).for_each(|(k, gk)| {
             if !nodes[k].surface {
                 return; // cluster receivers below
@@ -1165,7 +1141,7 @@ impl Hierarchy {
         // and normal-dependent pushes extrapolate, so rows that sum to one can still
         // amplify a non-uniform `x` slightly; with the cap ‖F·x‖∞ ≤ ‖x‖∞ holds and
         // Jacobi stays below E/(1 − ρ)).
-        let top = reads.first().map_or(Rgb::ZERO, |r| r[0].hi);
+        let top = hi.first().copied().unwrap_or(Rgb::ZERO);
         y.par_iter_mut().enumerate().with_min_len(256).for_each(|(e, ye)| {
             *ye *= self.link_scale[e] as f64;
             if let Some(d) = self.direct.as_ref().filter(|_| direct) {
@@ -1276,18 +1252,24 @@ impl Hierarchy {
     fn source_value(&self, k: usize, t: usize, src: &Sources) -> Rgb {
         let s = self.link_src[t] as usize;
         let dir = self.read_of(k, t);
+        let hi = src.hi;
         if dir == Link::MEAN {
             src.mean[s]
         } else {
-            let r = &src.reads[s][!self.is_near(t) as usize];
+            let ax = self.tree.nodes[s].area_x as f64;
+            let (mean, nb) = if self.is_near(t) || !(ax > 0.0) {
+                (src.mean[s], src.nb)
+            } else {
+                (src.sx[s] / ax, src.nbx)
+            };
             let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
-            let n = &r.n;
+            let n = &nb[s];
             // A weighted mean of the source's radiosities in truth; the first-order reading
             // can overshoot (normals that cancel, as on two-sided pairs) and is held to
             // the range they span, so that no link amplifies.
-            (r.mean * dir[0] as f64 + Rgb::new(beta.dot(n[0]), beta.dot(n[1]), beta.dot(n[2])))
+            (mean * dir[0] as f64 + Rgb::new(beta.dot(n[0]), beta.dot(n[1]), beta.dot(n[2])))
                 .max(Rgb::ZERO)
-                .min(r.hi)
+                .min(hi[s])
         }
     }
 
