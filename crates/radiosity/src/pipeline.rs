@@ -445,6 +445,9 @@ impl Prepared {
     fn finish(self, mut solution: Solution, solve_seconds: f64, progress: &dyn Progress) -> Solved {
         let mut timings = self.timings;
         timings.solve = solve_seconds;
+        if let Some(t) = &self.transport {
+            t.release_buffers(); // no product follows soon: the render gathers by rays
+        }
         // Split what escaped into openings and back faces, and warn when back faces take much.
         let loss = crate::back_faces::split_escaped(
             &self.scene,
@@ -603,6 +606,7 @@ pub fn indirect_irradiance(scene: &Scene, mesh: &Mesh, transport: &dyn Transport
     let reflected = reflected_radiosity(scene, mesh, solution);
     let mut h = vec![Rgb::ZERO; reflected.len()];
     transport.gather(&reflected, &mut h);
+    transport.release_buffers();
     h
 }
 

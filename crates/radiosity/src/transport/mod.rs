@@ -34,6 +34,9 @@ pub trait Transport: Sync {
     }
     /// Bytes of memory held.
     fn memory_bytes(&self) -> usize;
+    /// Frees scratch memory kept from one product to the next (the hierarchy's per-node
+    /// buffers), once no more products follow soon.
+    fn release_buffers(&self) {}
 }
 
 /// How the operator is represented: a runtime choice (`--transport`).
@@ -136,6 +139,11 @@ impl Transport for Operator {
         match self {
             Operator::Rows(r) => r.memory_bytes(),
             Operator::Hierarchical(h) => h.memory_bytes(),
+        }
+    }
+    fn release_buffers(&self) {
+        if let Operator::Hierarchical(h) = self {
+            h.release_buffers();
         }
     }
 }
