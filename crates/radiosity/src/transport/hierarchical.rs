@@ -1147,7 +1147,7 @@ impl Hierarchy {
         if m > 0 && !nodes[0].surface {
             let mut bins = vec![[DVec3::ZERO; 3]; 2 * DIR_BINS];
             let mut lit = Vec::new();
-            self.walk_clusters(0, &mut bins, 0, &src, &mut lit);
+            self.walk_clusters(0, &mut bins, &mut [0; 3], 0, &src, &mut lit);
             for (c, v) in lit {
                 g[c as usize].0 += v;
             }
@@ -1203,11 +1203,26 @@ impl Hierarchy {
     /// child as `Σ_b max(0, n·V_b)` at its normal (appended to `out`) and recurses into
     /// cluster children; the bins are restored before returning. Large subtrees run in
     /// parallel on copies.
-    fn walk_clusters(&self, k: usize, bins: &mut [[DVec3; 3]], active: usize, src: &Sources, out: &mut Vec<(u32, Rgb)>) {
+    /// `used` marks the bins that links on the path have touched (bit `b % 64` of word
+    /// `b / 64`): the others hold exactly zero, so a surface child sums only the marked
+    /// ones (in bin order, the same sums as over all 2 × [`DIR_BINS`]).
+    #[allow(clippy::too_many_arguments)]
+    fn walk_clusters(
+        &self,
+        k: usize,
+        bins: &mut [[DVec3; 3]],
+        used: &mut [u64; 3],
+        active: usize,
+        src: &Sources,
+        out: &mut Vec<(u32, Rgb)>,
+    ) {
+        const _: () = assert!(2 * DIR_BINS <= 3 * 64, "the bin marks are three words");
         let nodes = &self.tree.nodes;
         let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
-        // The bins this node's links change, with their old values (restored exactly).
+        // The bins this node's links change, with their old values (restored exactly), and
+        // the marks it sets (cleared on return).
         let mut saved: Vec<(usize, [DVec3; 3])> = Vec::with_capacity(b - a);
+        let mut marked = [0u64; 3];
         for t in a..b {
             let w = self.source_value(k, t, src) * self.factor(t);
             let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
@@ -1216,6 +1231,11 @@ impl Hierarchy {
             saved.push((bin, bins[bin]));
             for c in 0..3 {
                 bins[bin][c] += d * w[c];
+            }
+            let (word, bit) = (bin / 64, 1u64 << (bin % 64));
+            if used[word] & bit == 0 {
+                used[word] |= bit;
+                marked[word] |= bit;
             }
         }
         let active = active + (b - a);
@@ -1226,33 +1246,45 @@ impl Hierarchy {
                 continue;
             }
             let n = nodes[c as usize].normal();
-            let take = |bins: &[[DVec3; 3]]| {
-                let mut v = Rgb::ZERO;
-                for bin in bins {
-                    v += Rgb::new(n.dot(bin[0]).max(0.0), n.dot(bin[1]).max(0.0), n.dot(bin[2]).max(0.0));
+            // Far bins (the first DIR_BINS) and near bins, each summed in bin order.
+            let (mut far, mut near) = (Rgb::ZERO, Rgb::ZERO);
+            for (word, &bits) in used.iter().enumerate() {
+                let mut bits = bits;
+                while bits != 0 {
+                    let b = word * 64 + bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let bin = &bins[b];
+                    let v = Rgb::new(n.dot(bin[0]).max(0.0), n.dot(bin[1]).max(0.0), n.dot(bin[2]).max(0.0));
+                    if b < DIR_BINS {
+                        far += v;
+                    } else {
+                        near += v;
+                    }
                 }
-                v
-            };
+            }
             // Only its exposed part takes light that reaches the cluster from afar.
-            let (far, near) = bins.split_at(DIR_BINS);
-            out.push((c, take(far) * self.tree.exposure(c) + take(near)));
+            out.push((c, far * self.tree.exposure(c) + near));
         }
         let [c0, c1] = nd.child;
         if is_cluster(c0) && is_cluster(c1) && nd.count as usize >= PARALLEL_WALK {
             let mut copy = bins.to_vec();
+            let mut copy_used = *used;
             let mut other = Vec::new();
             rayon::join(
-                || self.walk_clusters(c0 as usize, &mut copy, active, src, &mut other),
-                || self.walk_clusters(c1 as usize, bins, active, src, out),
+                || self.walk_clusters(c0 as usize, &mut copy, &mut copy_used, active, src, &mut other),
+                || self.walk_clusters(c1 as usize, bins, used, active, src, out),
             );
             out.append(&mut other);
         } else {
             for c in nd.child.into_iter().filter(|&c| is_cluster(c)) {
-                self.walk_clusters(c as usize, bins, active, src, out);
+                self.walk_clusters(c as usize, bins, used, active, src, out);
             }
         }
         for (bin, old) in saved.into_iter().rev() {
             bins[bin] = old;
+        }
+        for (u, m) in used.iter_mut().zip(marked) {
+            *u &= !m;
         }
     }
 
