@@ -1147,7 +1147,7 @@ impl Hierarchy {
         if m > 0 && !nodes[0].surface {
             let mut bins = vec![[DVec3::ZERO; 3]; 2 * DIR_BINS];
             let mut lit = Vec::new();
-            self.walk_clusters(0, &mut bins, &mut [0; 3], 0, &src, &mut lit);
+            self.walk_clusters(0, &mut bins, &mut [0; 3], &src, &mut lit);
             for (c, v) in lit {
                 g[c as usize].0 += v;
             }
@@ -1197,25 +1197,15 @@ impl Hierarchy {
         }
     }
 
-
     /// Cluster receivers below node `k` (a cluster): adds `k`'s links to the directional
-    /// `bins` (`active` counts links on the path so far), hands the sum to each surface
-    /// child as `Σ_b max(0, n·V_b)` at its normal (appended to `out`) and recurses into
-    /// cluster children; the bins are restored before returning. Large subtrees run in
-    /// parallel on copies.
+    /// `bins`, hands the sum to each surface child as `Σ_b max(0, n·V_b)` at its normal
+    /// (appended to `out`) and recurses into cluster children; the bins are restored before
+    /// returning. Large subtrees run in parallel on copies.
+    ///
     /// `used` marks the bins that links on the path have touched (bit `b % 64` of word
     /// `b / 64`): the others hold exactly zero, so a surface child sums only the marked
     /// ones (in bin order, the same sums as over all 2 × [`DIR_BINS`]).
-    #[allow(clippy::too_many_arguments)]
-    fn walk_clusters(
-        &self,
-        k: usize,
-        bins: &mut [[DVec3; 3]],
-        used: &mut [u64; 3],
-        active: usize,
-        src: &Sources,
-        out: &mut Vec<(u32, Rgb)>,
-    ) {
+    fn walk_clusters(&self, k: usize, bins: &mut [[DVec3; 3]], used: &mut [u64; 3], src: &Sources, out: &mut Vec<(u32, Rgb)>) {
         const _: () = assert!(2 * DIR_BINS <= 3 * 64, "the bin marks are three words");
         let nodes = &self.tree.nodes;
         let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
@@ -1238,11 +1228,11 @@ impl Hierarchy {
                 marked[word] |= bit;
             }
         }
-        let active = active + (b - a);
         let nd = &nodes[k];
         let is_cluster = |c: u32| c != NONE && !nodes[c as usize].surface;
         for c in nd.child {
-            if c == NONE || !nodes[c as usize].surface || active == 0 {
+            // No marks: no link on the path, nothing to hand out.
+            if c == NONE || !nodes[c as usize].surface || *used == [0; 3] {
                 continue;
             }
             let n = nodes[c as usize].normal();
@@ -1271,13 +1261,13 @@ impl Hierarchy {
             let mut copy_used = *used;
             let mut other = Vec::new();
             rayon::join(
-                || self.walk_clusters(c0 as usize, &mut copy, &mut copy_used, active, src, &mut other),
-                || self.walk_clusters(c1 as usize, bins, used, active, src, out),
+                || self.walk_clusters(c0 as usize, &mut copy, &mut copy_used, src, &mut other),
+                || self.walk_clusters(c1 as usize, bins, used, src, out),
             );
             out.append(&mut other);
         } else {
             for c in nd.child.into_iter().filter(|&c| is_cluster(c)) {
-                self.walk_clusters(c as usize, bins, used, active, src, out);
+                self.walk_clusters(c as usize, bins, used, src, out);
             }
         }
         for (bin, old) in saved.into_iter().rev() {
