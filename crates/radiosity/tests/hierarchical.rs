@@ -1018,6 +1018,117 @@ fn operator_against_ray_gather() {
     }
 }
 
+/// Diagnostic (ignored): the energy books of the hierarchy, light source by light source.
+/// Emitted light: what the direct columns deliver (`Σ_i A_i Σ_j D_ij E_j`) against rays
+/// shot from the emitting elements themselves (`RAYS` per element, default 400 000,
+/// cosine-distributed from area-uniform points; each lands on one element, so the shot
+/// books close exactly: a closed room receives 100 %), per kind of receiver and for the
+/// `TOP` polygons with the largest excess. Reflected light: what the operator delivers
+/// against what leaves (`Σ A (F·R)` against `Σ A R`, `R = B − E`). A share above what was
+/// shot is light created. `MODEL` as in `operator_against_ray_gather`.
+#[test]
+#[ignore]
+fn energy_books_against_shooting() {
+    let rel = std::env::var("MODEL").unwrap_or_else(|_| "scenes/conference/conference-lit.toml".into());
+    let Some(path) = common::shared(&rel) else {
+        return;
+    };
+    let k: usize = std::env::var("RAYS").ok().and_then(|x| x.parse().ok()).unwrap_or(400_000);
+    let n_top: usize = std::env::var("TOP").ok().and_then(|x| x.parse().ok()).unwrap_or(10);
+    let scene = radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    let sol = solve_scene(scene, &hierarchical(), &NoProgress).unwrap();
+    let h = sol.transport.as_ref().unwrap().hierarchy().unwrap();
+    let b = &sol.solution.radiosity;
+    let refl = radiosity::pipeline::reflected_radiosity(&sol.scene, &sol.mesh, &sol.solution);
+    let em: Vec<Rgb> = b.iter().zip(&refl).map(|(b, r)| *b - *r).collect();
+    let area = sol.receivers.open_areas(&sol.mesh);
+    let power = |x: &[Rgb]| x.iter().zip(&area).map(|(v, a)| v.y * a).sum::<f64>();
+    let (emitted, leaving) = (power(&em), power(&refl));
+    let mut y = vec![Rgb::ZERO; b.len()];
+    h.gather(&refl, &mut y);
+    println!("reflected light: the operator delivers {:.4} of what leaves", power(&y) / leaving);
+    let Some(d) = h.direct() else {
+        println!("no direct columns");
+        return;
+    };
+    // Shooting from every emitting element (xorshift stream; cosine directions about its
+    // normal in the frame of Duff et al. 2017).
+    let locator = radiosity::mesh::Locator::new(&sol.mesh);
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut rnd = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut shot = vec![0.0f64; b.len()];
+    let mut lost = 0.0;
+    let offset = 1e-7 * sol.scene.diagonal();
+    for j in (0..b.len()).filter(|&j| em[j].y > 0.0 && area[j] > 0.0) {
+        let e = &sol.mesh.elements[j];
+        let (c, nv) = e.corners(&sol.mesh.positions);
+        let n = e.normal;
+        let sign = 1f64.copysign(n.z);
+        let a = -1.0 / (sign + n.z);
+        let bq = n.x * n.y * a;
+        let (t, u) = (DVec3::new(1.0 + sign * n.x * n.x * a, sign * bq, -sign * n.x), DVec3::new(bq, sign + n.y * n.y * a, -n.y));
+        let w = em[j].y * area[j] / k as f64;
+        for _ in 0..k {
+            let p = radiosity::mesh::point_on(&c, nv == 4, rnd(), rnd()) + n * offset;
+            let (u1, u2) = (rnd(), rnd());
+            let (r, phi) = (u1.sqrt(), 2.0 * std::f64::consts::PI * u2);
+            let dir = t * (r * phi.cos()) + u * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt();
+            let hit = sol.rays.closest_facing(p.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch));
+            match locator.front_hit(&sol.mesh, &sol.rays, p, dir, hit) {
+                Some(i) => shot[i as usize] += w,
+                None => lost += w,
+            }
+        }
+    }
+    let direct: Vec<f64> = (0..b.len()).map(|i| d.gather_row(i, &em).y * area[i]).collect();
+    println!(
+        "emitted light: direct columns deliver {:.4} of it, shot rays {:.4} (lost {:.4})",
+        direct.iter().sum::<f64>() / emitted,
+        shot.iter().sum::<f64>() / emitted,
+        lost / emitted
+    );
+    let mut kinds = std::collections::BTreeMap::<String, (f64, f64)>::new();
+    let mut polys = std::collections::HashMap::<u32, (f64, f64)>::new();
+    for i in 0..b.len() {
+        let patch = sol.mesh.elements[i].patch;
+        let back = sol.scene.polygons[patch as usize].back_side;
+        let open = sol.receivers.open_fraction[i];
+        let kind = format!(
+            "{} {}",
+            if back { "back" } else { "front" },
+            if open >= 1.0 { "open" } else if open > 0.0 { "partly covered" } else { "covered" }
+        );
+        let e = kinds.entry(kind).or_default();
+        e.0 += direct[i];
+        e.1 += shot[i];
+        let p = polys.entry(patch).or_default();
+        p.0 += direct[i];
+        p.1 += shot[i];
+    }
+    for (kind, (dv, sv)) in &kinds {
+        println!("{kind:24} direct {:.4}  shot {:.4}  excess {:+.4}", dv / emitted, sv / emitted, (dv - sv) / emitted);
+    }
+    let mut v: Vec<_> = polys.into_iter().collect();
+    v.sort_by(|a, b| (b.1 .0 - b.1 .1).total_cmp(&(a.1 .0 - a.1 .1)));
+    for (p, (dv, sv)) in v.iter().take(n_top) {
+        let poly = &sol.scene.polygons[*p as usize];
+        println!(
+            "excess {:+.5} direct {:.5} shot {:.5} back {} normal {:.2?} {:?}",
+            (dv - sv) / emitted,
+            dv / emitted,
+            sv / emitted,
+            poly.back_side,
+            poly.normal,
+            poly.loc
+        );
+    }
+}
+
 /// Diagnostic (ignored): the links of a few elements of one polygon (env `LINE`, its OBJ
 /// line; default the conference ceiling; `MODEL` as in `operator_against_ray_gather`; `PICKS` elements, `RAYS` rays each; `WHY=1`
 /// prints where the tree stops linking the largest unlinked hits) against Monte Carlo
