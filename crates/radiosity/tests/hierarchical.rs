@@ -1051,16 +1051,10 @@ fn energy_books_against_shooting() {
         println!("no direct columns");
         return;
     };
-    // Shooting from every emitting element (xorshift stream; cosine directions about its
-    // normal in the frame of Duff et al. 2017).
+    // Shooting from every emitting element (cosine directions about its normal in the
+    // frame of Duff et al. 2017).
     let locator = radiosity::mesh::Locator::new(&sol.mesh);
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut rnd = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = common::xorshift(0x9e37_79b9_7f4a_7c15);
     let mut shot = vec![0.0f64; b.len()];
     let mut lost = 0.0;
     let offset = 1e-7 * sol.scene.diagonal();
@@ -1179,13 +1173,7 @@ fn link_truth() {
             (mean * dir[0] as f64 + DVec3::new(dir[1] as f64, dir[2] as f64, dir[3] as f64).dot(nb)).clamp(0.0, hi)
         }
     };
-    let mut rng = 12345u64;
-    let mut rnd = || {
-        rng ^= rng << 13;
-        rng ^= rng >> 7;
-        rng ^= rng << 17;
-        (rng >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = common::xorshift(12345u64);
     let (mut tot_mc, mut tot_l, mut tot_miss) = (0.0, 0.0, 0.0);
     let (mut cl_mc, mut cl_l, mut sf_mc, mut sf_l) = (0.0, 0.0, 0.0, 0.0);
     let (mut fs_l, mut fs_m, mut fc_l, mut fc_m) = (0.0, 0.0, 0.0, 0.0);
@@ -1372,13 +1360,7 @@ fn light_on_covered_parts() {
     let locator = radiosity::mesh::Locator::new(mesh);
     let (_, em) = radiosity::pipeline::element_materials(&sol.scene, mesh);
     let area = sol.receivers.open_areas(mesh);
-    let mut rng = 99u64;
-    let mut rnd = || {
-        rng ^= rng << 13;
-        rng ^= rng >> 7;
-        rng ^= rng << 17;
-        (rng >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = common::xorshift(99u64);
     let inside = |e: usize, p: DVec3| {
         let n = mesh.elements[e].normal;
         sol.receivers.open_pieces(mesh, e).iter().any(|poly| {

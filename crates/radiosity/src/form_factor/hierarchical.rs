@@ -88,10 +88,10 @@
 //! Two elements (a leaf–leaf link, or an element's factor to an emitting element in the
 //! direct columns) take the point-sampled factor of [`super::point_sampled`]'s kernel: the
 //! contour integral at area-uniform random points of the receiver's open part (1, 4 or 9 of
-//! them, stratified, more when close) times the visible fraction of
-//! `visibility_samples²` rays. Random rather than the fixed receiver points: a contact
-//! shadow lies at an element's edge beside its occluder, away from every fixed point, so
-//! fixed points over-read the light there (`Ctx::leaf_factor`). Each task draws from its own random
+//! them, stratified, more when close) times the visible fraction of `visibility_samples²`
+//! rays. Random rather than the fixed receiver points: a contact shadow lies at an
+//! element's edge beside its occluder, away from every fixed point, so fixed points
+//! over-read the light there (`Ctx::leaf_factor`). Each task draws from its own random
 //! stream, so the links do not depend on the thread count. [`predict_memory`] is checked
 //! before the coverage test and the links.
 

@@ -89,3 +89,15 @@ pub fn model_in_furnace(rel: &str, one_sided_room: bool) -> Option<Scene> {
     d.camera = None;
     Some(Scene::from_desc(d).unwrap())
 }
+
+/// Uniform numbers in [0, 1) from a xorshift64 stream started at `seed` (non-zero): cheap,
+/// reproducible randomness for the diagnostics.
+pub fn xorshift(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
