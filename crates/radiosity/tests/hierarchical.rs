@@ -1051,8 +1051,7 @@ fn energy_books_against_shooting() {
         println!("no direct columns");
         return;
     };
-    // Shooting from every emitting element (cosine directions about its normal in the
-    // frame of Duff et al. 2017).
+    // Shooting from every emitting element.
     let locator = radiosity::mesh::Locator::new(&sol.mesh);
     let mut rnd = common::xorshift(0x9e37_79b9_7f4a_7c15);
     let mut shot = vec![0.0f64; b.len()];
@@ -1061,17 +1060,10 @@ fn energy_books_against_shooting() {
     for j in (0..b.len()).filter(|&j| em[j].y > 0.0 && area[j] > 0.0) {
         let e = &sol.mesh.elements[j];
         let (c, nv) = e.corners(&sol.mesh.positions);
-        let n = e.normal;
-        let sign = 1f64.copysign(n.z);
-        let a = -1.0 / (sign + n.z);
-        let bq = n.x * n.y * a;
-        let (t, u) = (DVec3::new(1.0 + sign * n.x * n.x * a, sign * bq, -sign * n.x), DVec3::new(bq, sign + n.y * n.y * a, -n.y));
         let w = em[j].y * area[j] / k as f64;
         for _ in 0..k {
-            let p = radiosity::mesh::point_on(&c, nv == 4, rnd(), rnd()) + n * offset;
-            let (u1, u2) = (rnd(), rnd());
-            let (r, phi) = (u1.sqrt(), 2.0 * std::f64::consts::PI * u2);
-            let dir = t * (r * phi.cos()) + u * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt();
+            let p = radiosity::mesh::point_on(&c, nv == 4, rnd(), rnd()) + e.normal * offset;
+            let dir = cosine_about(e.normal, rnd(), rnd());
             let hit = sol.rays.closest_facing(p.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch));
             match locator.front_hit(&sol.mesh, &sol.rays, p, dir, hit) {
                 Some(i) => shot[i as usize] += w,

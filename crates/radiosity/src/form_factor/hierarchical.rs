@@ -1469,18 +1469,17 @@ impl Ctx<'_> {
         // room's direct columns delivered 100.84 % of what its lamps emit (rays shot from
         // the lamps: 100.00 %) and the room created 1.6 % light (BENCHMARKS.md).
         use rand::RngExt;
-        sc.points.clear();
+        sc.receiver.clear();
         let (ci, ni) = ei.corners(&mesh.positions);
         for t in 0..k * k {
             let u = ((t % k) as f64 + rng.random::<f64>()) / k as f64;
             let v = ((t / k) as f64 + rng.random::<f64>()) / k as f64;
             let (u, v) = self.receivers.open_uv(i as usize, u, v, || rng.random::<f64>());
-            sc.points.push((crate::mesh::point_on(&ci, ni == 4, u, v), 0.0));
+            sc.receiver.push(crate::mesh::point_on(&ci, ni == 4, u, v));
         }
         let kv = self.ff.visibility_samples.max(1);
         let mut total = 0.0;
-        for t in 0..sc.points.len() {
-            let x = sc.points[t].0;
+        for &x in &sc.receiver {
             let f = point_to_polygon(x, ei.normal, cj, ej.normal);
             if f <= 0.0 {
                 continue;
@@ -1511,7 +1510,7 @@ impl Ctx<'_> {
                 total += f * seen as f64 / valid as f64;
             }
         }
-        total / sc.points.len() as f64
+        total / sc.receiver.len() as f64
     }
 }
 
@@ -1608,6 +1607,8 @@ struct Scratch {
     frontier: Vec<u32>,
     vis: Vec<(f64, f64)>,
     front: Vec<DVec3>,
+    /// Receiver points of [`Ctx::leaf_factor`].
+    receiver: Vec<DVec3>,
     /// Point pairs (position, normal, polygon) of [`Ctx::terminal_factor`].
     pairs: Vec<((DVec3, DVec3, u32), (DVec3, DVec3, u32))>,
 }
