@@ -121,6 +121,8 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
             shadow_axis: a.shadow_rays,
             gather_axis: axis,
             seed: a.solve.seed,
+            // One position per texel: nothing to adapt.
+            noise: 0.0,
         };
         let (quantity, element_l): (_, Vec<_>) = match mode {
             LightmapMode::Emissive => (lightmap::Quantity::Radiance, b.iter().map(|x| *x / std::f64::consts::PI).collect()),

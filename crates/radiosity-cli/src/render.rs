@@ -79,6 +79,12 @@ pub struct RenderArgs {
     /// (where 4 × 4 rays per sample estimate a sky)]
     #[arg(long, value_name = "N")]
     pub gather_rays: Option<usize>,
+    /// Final gather, adaptive sampling: a pixel stops taking samples (after 8, in rounds of
+    /// 4, up to --spp²) once the standard error of its mean is below this share of it
+    /// (pixels darker than a quarter of the image's mean: of that quarter); edges take every
+    /// sample; 0 takes every sample in every pixel.
+    #[arg(long, value_name = "SHARE", default_value_t = radiosity::render::gather::DEFAULT_NOISE)]
+    pub pixel_noise: f64,
     /// PNG exposure: radiance is multiplied by this before sRGB encoding [default: automatic].
     #[arg(long, value_name = "SCALE")]
     pub exposure: Option<f64>,
@@ -140,6 +146,9 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let gather = a.mode == "gather";
     if a.shadow_rays == 0 || a.shadow_rays > 16 {
         bail!("--shadow-rays must be between 1 and 16");
+    }
+    if !(a.pixel_noise.is_finite() && (0.0..=1.0).contains(&a.pixel_noise)) {
+        bail!("--pixel-noise must be between 0 and 1 (a share of the pixel's value), got {}", a.pixel_noise);
     }
     if a.gather_rays.is_some_and(|g| g > 16) {
         bail!("--gather-rays must be between 0 and 16");
@@ -370,6 +379,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                     shadow_axis: a.shadow_rays,
                     gather_axis: gather_rays,
                     seed: a.solve.seed,
+                    noise: a.pixel_noise,
                 };
                 solved.render_gather(cam, &gopts, &tracer, hv, &render_progress)
             }

@@ -258,7 +258,7 @@ fn final_gather_on_the_hierarchy_matches_rows() {
         let tracer = radiosity::render::gouraud::ElementTracer::new(&solved.mesh, &two_sided);
         let indirect = solved.indirect(false);
         let opts =
-            radiosity::render::gather::Options { width: 64, height: 64, spp_axis: 2, shadow_axis: 2, gather_axis: 0, seed: 0 };
+            radiosity::render::gather::Options { width: 64, height: 64, spp_axis: 2, shadow_axis: 2, gather_axis: 0, seed: 0, noise: 0.0 };
         solved.render_gather(&camera, &opts, &tracer, &indirect, &NoProgress).0
     };
     let rows = render(&Settings::default());

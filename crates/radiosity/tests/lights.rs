@@ -96,7 +96,7 @@ fn floor_hit(cam: &PinholeCamera, x: f64, y: f64) -> Option<DVec3> {
 fn gather_image(solved: &Solved, camera: &Camera, size: usize) -> (Vec<Rgb>, PinholeCamera) {
     let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
     let tracer = ElementTracer::new(&solved.mesh, &two);
-    let opts = gather::Options { width: size, height: size, spp_axis: 8, shadow_axis: 1, gather_axis: 2, seed: 3 };
+    let opts = gather::Options { width: size, height: size, spp_axis: 8, shadow_axis: 1, gather_axis: 2, seed: 3, noise: 0.0 };
     let (img, _) = solved.render_gather(camera, &opts, &tracer, &solved.indirect(false), &NoProgress);
     (img.pixels, PinholeCamera::new(camera, size, size))
 }
@@ -339,7 +339,7 @@ fn rect_light_from_toml_lights_the_floor_below_by_its_view_factor() {
     let camera = Camera { position: DVec3::new(0.0, 0.5, 0.0), look_at: DVec3::ZERO, up: DVec3::Z, vfov_deg: 0.5 };
     let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
     let tracer = ElementTracer::new(&solved.mesh, &two);
-    let opts = gather::Options { width: 4, height: 4, spp_axis: 1, shadow_axis: 8, gather_axis: 2, seed: 1 };
+    let opts = gather::Options { width: 4, height: 4, spp_axis: 1, shadow_axis: 8, gather_axis: 2, seed: 1, noise: 0.0 };
     let (img, _) = solved.render_gather(&camera, &opts, &tracer, &solved.indirect(false), &NoProgress);
     for p in &img.pixels {
         assert!((p.x - exact).abs() < 1e-3 * exact, "floor below the panel: {} against {exact}", p.x);

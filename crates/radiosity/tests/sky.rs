@@ -178,7 +178,7 @@ fn final_gather_shows_the_sky_and_a_plate_lit_by_it_exactly() {
         assert!(sky_px > 300 && plate_px > 200, "{what}: {sky_px} sky and {plate_px} plate pixels");
     };
     for (gathered, axis) in [(true, 2), (false, 0)] {
-        let opts = radiosity::render::gather::Options { width: w, height: hgt, spp_axis: 2, shadow_axis: 2, gather_axis: axis, seed: 1 };
+        let opts = radiosity::render::gather::Options { width: w, height: hgt, spp_axis: 2, shadow_axis: 2, gather_axis: axis, seed: 1, noise: 0.0 };
         let indirect = solved.indirect(gathered);
         let (img, _) = solved.render_gather(&cam, &opts, &tracer, &indirect, &NoProgress);
         check(&img, if gathered { "gathered" } else { "interpolated" });
@@ -358,7 +358,7 @@ fn final_gather_shows_the_sunlit_floor_and_the_sun() {
     let sun = solved.scene.sky.as_ref().unwrap().sun.unwrap();
     let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
     let tracer = ElementTracer::new(&solved.mesh, &two);
-    let opts = radiosity::render::gather::Options { width: 16, height: 16, spp_axis: 2, shadow_axis: 2, gather_axis: 2, seed: 5 };
+    let opts = radiosity::render::gather::Options { width: 16, height: 16, spp_axis: 2, shadow_axis: 2, gather_axis: 2, seed: 5, noise: 0.0 };
     let exact = 0.5 * 100.0 * t.cos() * 0.5 * (1.0 + sun.cos_radius()) / PI;
     let down = Camera { position: DVec3::new(1.0, 1.0, 1.0), look_at: DVec3::new(1.0, 0.0, 1.0), up: DVec3::Z, vfov_deg: 60.0 };
     let indirect = solved.indirect(true);
@@ -456,7 +456,7 @@ fn environment_image_lights_surfaces_by_direction() {
     let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
     let tracer = ElementTracer::new(&solved.mesh, &two);
     let gouraud = radiosity::render::gouraud::Options { width: 16, height: 16, spp_axis: 2, shading: radiosity::render::gouraud::Shading::Gouraud };
-    let opts = radiosity::render::gather::Options { width: 16, height: 16, spp_axis: 2, shadow_axis: 2, gather_axis: 2, seed: 1 };
+    let opts = radiosity::render::gather::Options { width: 16, height: 16, spp_axis: 2, shadow_axis: 2, gather_axis: 2, seed: 1, noise: 0.0 };
     let (gathered, _) = solved.render_gather(&cam, &opts, &tracer, &solved.indirect(true), &NoProgress);
     for img in [solved.render(&cam, &gouraud, &tracer, &NoProgress), gathered] {
         for p in &img.pixels {

@@ -309,7 +309,7 @@ fn gathered_pixels_show_each_texel_and_elements_its_footprint_mean() {
     let pc = PinholeCamera::new(&cam, w, h);
     let two: Vec<bool> = solved.scene.polygons.iter().map(|p| p.two_sided).collect();
     let tracer = ElementTracer::new(&solved.mesh, &two);
-    let opts = gather::Options { width: w, height: h, spp_axis: 1, shadow_axis: 1, gather_axis: 2, seed: 1 };
+    let opts = gather::Options { width: w, height: h, spp_axis: 1, shadow_axis: 1, gather_axis: 2, seed: 1, noise: 0.0 };
     let (img, _) = solved.render_gather(&cam, &opts, &tracer, &solved.indirect(false), &NoProgress);
     let mut checked = 0;
     for y in 0..h {
@@ -449,7 +449,7 @@ fn moz_lightmap_keeps_the_texture_and_holds_the_irradiance() {
     let n = 128;
     let atlas = Atlas::build(&solved.scene, &AtlasOptions { size: n, ..Default::default() }).unwrap();
     let indirect = solved.indirect(false);
-    let opts = gather::Options { width: n, height: n, spp_axis: 1, shadow_axis: 2, gather_axis: 0, seed: 1 };
+    let opts = gather::Options { width: n, height: n, spp_axis: 1, shadow_axis: 2, gather_axis: 0, seed: 1, noise: 0.0 };
     let b = solved.solution.display_radiosity();
     let l: Vec<_> = b.iter().map(|b| *b / PI).collect();
     let sc = &solved.scene;
@@ -635,7 +635,7 @@ fn moz_bake_keeps_emission_textures() {
     let solved = solve_scene(scene, &Settings { mesh_size: Some(0.5), ..Default::default() }, &NoProgress).unwrap();
     let atlas = Atlas::build(&solved.scene, &AtlasOptions { size: 64, ..Default::default() }).unwrap();
     let l: Vec<_> = solved.solution.display_radiosity().iter().map(|b| *b / PI).collect();
-    let gopts = gather::Options { width: 64, height: 64, spp_axis: 1, shadow_axis: 1, gather_axis: 0, seed: 1 };
+    let gopts = gather::Options { width: 64, height: 64, spp_axis: 1, shadow_axis: 1, gather_axis: 0, seed: 1, noise: 0.0 };
     let (irr, _) = lightmap::render(&solved.scene, &solved.mesh, &solved.rays, &solved.indirect(false), &atlas, &l, Quantity::Irradiance, &gopts, &NoProgress);
     let k = 2.0;
     let (png_bytes, intensity, _) = moz_lightmap_png(&irr, k, 0.0).unwrap();
