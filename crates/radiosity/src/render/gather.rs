@@ -105,16 +105,33 @@ pub enum Indirect {
     },
 }
 
-/// Stratified points for one pixel: `count` jittered cells of a `side × side` grid over
-/// [0,1)², shuffled so that consecutive chunks (one per pixel position) each spread over
-/// the whole domain while the pixel as a whole stays stratified.
-fn pixel_pattern(side: usize, rng: &mut crate::sampling::Rng, out: &mut Vec<(f64, f64)>) {
+/// The first `count` of one pixel's stratified points: jittered cells of a `side × side`
+/// grid over [0,1)², in random order (a partial Fisher–Yates shuffle), so that consecutive
+/// chunks (one per pixel position) each spread over the whole domain while all `side²`
+/// together stay stratified. The draws for `count` points are a prefix of those for any
+/// larger count, so a pixel can take more positions later from the same stream (adaptive
+/// sampling) and draws nothing for positions it never takes.
+fn pixel_pattern(side: usize, count: usize, rng: &mut crate::sampling::Rng, cells: &mut Vec<u32>, out: &mut Vec<(f64, f64)>) {
     use rand::RngExt;
-    stratified(side, rng, out);
-    for i in (1..out.len()).rev() {
-        let j = rng.random_range(0..=i);
-        out.swap(i, j);
+    let n = side * side;
+    let count = count.min(n);
+    cells.clear();
+    cells.extend(0..n as u32);
+    out.clear();
+    let inv = 1.0 / side as f64;
+    for i in 0..count {
+        cells.swap(i, rng.random_range(i..n));
+        let c = cells[i] as usize;
+        let (a, b): (f64, f64) = (rng.random(), rng.random());
+        out.push((((c % side) as f64 + a) * inv, ((c / side) as f64 + b) * inv));
     }
+}
+
+/// The stream of one pattern of a pixel: pattern `tag` of the pixel whose stream gave
+/// `base`.
+fn pattern_rng(base: u64, tag: u64) -> crate::sampling::Rng {
+    use rand::SeedableRng;
+    crate::sampling::Rng::seed_from_u64(crate::sampling::mix64(base ^ crate::sampling::mix64(tag.wrapping_add(0x7061_7474))))
 }
 
 /// The light sources and settings of the final gather, shared by every position it shades:
@@ -142,6 +159,7 @@ pub struct Patterns {
     gather: Vec<(f64, f64)>,
     sun: Vec<(f64, f64)>,
     scratch: Vec<(f64, f64)>,
+    cells: Vec<u32>,
 }
 
 impl<'a> Shader<'a> {
@@ -167,18 +185,23 @@ impl<'a> Shader<'a> {
         }
     }
 
-    /// Draws the random points of one pixel with `side × side` positions.
-    pub fn draw(&self, side: usize, rng: &mut crate::sampling::Rng, pat: &mut Patterns) {
+    /// Draws the random points of the first `positions` of one pixel's `side × side`
+    /// positions; drawn again from the same `rng` state with more positions, the first ones
+    /// are the same. Takes one number from `rng`; each pattern has a stream of its own.
+    pub fn draw(&self, side: usize, positions: usize, rng: &mut crate::sampling::Rng, pat: &mut Patterns) {
+        use rand::RngExt;
+        let base: u64 = rng.random();
         let npat = if self.ems.len() <= LOOP_EMITTERS { self.ems.len() } else { 1 };
+        let (m2, g2) = (self.shadow_axis * self.shadow_axis, self.gather_axis * self.gather_axis);
         pat.shadows.resize_with(npat, Vec::new);
-        for p in pat.shadows.iter_mut() {
-            pixel_pattern(side * self.shadow_axis, rng, p);
+        for (t, p) in pat.shadows.iter_mut().enumerate() {
+            pixel_pattern(side * self.shadow_axis, positions * m2, &mut pattern_rng(base, t as u64 + 2), &mut pat.cells, p);
         }
         if self.gather_axis > 0 {
-            pixel_pattern(side * self.gather_axis, rng, &mut pat.gather);
+            pixel_pattern(side * self.gather_axis, positions * g2, &mut pattern_rng(base, 0), &mut pat.cells, &mut pat.gather);
         }
         if self.sun.is_some() {
-            pixel_pattern(side * self.shadow_axis, rng, &mut pat.sun);
+            pixel_pattern(side * self.shadow_axis, positions * m2, &mut pattern_rng(base, 1), &mut pat.cells, &mut pat.sun);
         }
     }
 
@@ -401,10 +424,10 @@ pub fn render(
     let stopped = AtomicBool::new(false);
     // Draws pixel (x, y)'s sub-pixel points and patterns from its own stream (the same
     // every time).
-    let draw = |x: usize, y: usize, px: &mut PixelDraw| {
+    let draw = |x: usize, y: usize, positions: usize, px: &mut PixelDraw| {
         let mut rng = rng_for(opts.seed, (y * w + x) as u64);
         stratified(s, &mut rng, &mut px.sub);
-        shader.draw(s, &mut rng, &mut px.pat);
+        shader.draw(s, positions, &mut rng, &mut px.pat);
         position_order(&quads, &mut rng, &mut px.quads, &mut px.order);
     };
     // Takes positions `from..to` (in `order`) of pixel (x, y), drawn, into `acc`.
@@ -448,7 +471,7 @@ pub fn render(
             let mut px = PixelDraw::default();
             let mut nrays = 0;
             for (x, acc) in row.iter_mut().enumerate() {
-                draw(x, y, &mut px);
+                draw(x, y, first, &mut px);
                 nrays += take(x, y, 0, first, acc, &mut px);
             }
             progress.advance(1);
@@ -504,7 +527,7 @@ pub fn render(
                         continue;
                     }
                     // The same points as the first pass's: redrawn from the pixel's stream.
-                    draw(x, y, &mut px);
+                    draw(x, y, all, &mut px);
                     if is_edge {
                         nrays += take(x, y, from, all, acc, &mut px);
                         continue;

@@ -130,7 +130,7 @@ pub fn render(
                 }
                 let p = atlas.world(mesh.elements[e as usize].patch, x as f64 + 0.5, y as f64 + 0.5);
                 let mut rng = rng_for(opts.seed, (y * n + x) as u64);
-                shader.draw(1, &mut rng, &mut pat);
+                shader.draw(1, 1, &mut rng, &mut pat);
                 let (l, r) = match quantity {
                     Quantity::Radiance => shader.shade(e, p, 0, atlas.texel * atlas.texel, &mut pat),
                     Quantity::Irradiance => shader.irradiance(e, p, 0, &mut pat),
