@@ -370,7 +370,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let mut first_exposure = None;
     for (k, (name, cam, png_path, exr_path)) in views.iter().enumerate() {
         let tv = Instant::now();
-        let (img, rays) = match &indirect {
+        let (img, rays, positions) = match &indirect {
             Some(hv) => {
                 let gopts = gather::Options {
                     width: a.width,
@@ -381,13 +381,14 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                     seed: a.solve.seed,
                     noise: a.pixel_noise,
                 };
-                solved.render_gather(cam, &gopts, &tracer, hv, &render_progress)
+                let (img, sampled) = solved.render_gather_sampled(cam, &gopts, &tracer, hv, &render_progress);
+                (img, sampled.rays, Some(sampled.positions_per_pixel()))
             }
             None => {
                 let opts = gouraud::Options { width: a.width, height: a.height, spp_axis: spp, shading };
                 let img = solved.render(cam, &opts, &tracer, &render_progress);
                 let rays = (a.width * a.height * spp * spp) as u64;
-                (img, rays)
+                (img, rays, None)
             }
         };
         if render_progress.should_stop() {
@@ -413,7 +414,14 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             gather::Indirect::Gathered { .. } => format!("gathered ({gather_rays}×{gather_rays} rays per pixel position)"),
             gather::Indirect::Interpolated(_) => "interpolated from the vertices".to_string(),
         });
-        report.views.push(ViewReport { name: name.clone(), images: files, seconds: tv.elapsed().as_secs_f64(), rays, indirect });
+        report.views.push(ViewReport {
+            name: name.clone(),
+            images: files,
+            seconds: tv.elapsed().as_secs_f64(),
+            rays,
+            indirect,
+            positions_per_pixel: positions,
+        });
     }
     if let Some(dir) = &a.frames {
         let exposure = first_exposure.unwrap_or(1.0);
@@ -428,7 +436,15 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     }
     if !a.solve.quiet {
         let images = if report.images.is_empty() { "no image".to_string() } else { report.images.join(", ") };
-        eprintln!("wrote {images} in {:.2} s", report.timings.total);
+        // Adaptive sampling at work: the samples the pixels took, on average over the views.
+        let taken: Vec<f64> = report.views.iter().filter_map(|v| v.positions_per_pixel).collect();
+        let samples = if taken.is_empty() {
+            String::new()
+        } else {
+            let mean = taken.iter().sum::<f64>() / taken.len() as f64;
+            format!(" ({mean:.1} of {} samples per pixel on average)", spp * spp)
+        };
+        eprintln!("wrote {images} in {:.2} s{samples}", report.timings.total);
     }
     Ok(exit_code(stats.stop))
 }

@@ -146,6 +146,10 @@ pub struct ViewReport {
     /// position)" or "interpolated from the vertices"; None for Gouraud and flat images.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub indirect: Option<String>,
+    /// Final gather: the mean number of positions a pixel took (adaptive sampling, at most
+    /// `spp²`); None for Gouraud and flat images.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub positions_per_pixel: Option<f64>,
 }
 
 /// The whole report.

@@ -387,8 +387,42 @@ impl PixelSums {
     }
 }
 
+/// What one final-gather image took.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Sampling {
+    /// Rays cast (camera, shadow, gather and sky rays).
+    pub rays: u64,
+    /// Pixel positions shaded, over all pixels.
+    pub positions: u64,
+    /// Pixels drawn.
+    pub pixels: u64,
+}
+
+impl Sampling {
+    /// Mean positions per pixel drawn.
+    pub fn positions_per_pixel(&self) -> f64 {
+        self.positions as f64 / self.pixels.max(1) as f64
+    }
+}
+
 /// Renders by final gathering, with the indirect light from `indirect` (see the module
-/// docs). Returns the image and the rays cast.
+/// docs). Returns the image and the rays cast ([`render_sampled`] also counts positions).
+#[allow(clippy::too_many_arguments)]
+pub fn render(
+    scene: &Scene,
+    mesh: &Mesh,
+    rays: &SceneRays,
+    tracer: &ElementTracer,
+    indirect: &Indirect,
+    cam: &PinholeCamera,
+    opts: &Options,
+    progress: &dyn Progress,
+) -> (Image, u64) {
+    let (img, s) = render_sampled(scene, mesh, rays, tracer, indirect, cam, opts, progress);
+    (img, s.rays)
+}
+
+/// As [`render`], returning what the image took.
 ///
 /// With `opts.noise > 0` the sampling is adaptive: every pixel first takes
 /// [`ADAPTIVE_FIRST`] of its `spp²` positions (whole rounds of one per quadrant, see
@@ -402,7 +436,7 @@ impl PixelSums {
 /// and rays are the same as without adaptivity, in the same order, so `noise = 0` draws the
 /// fixed-sampling image.
 #[allow(clippy::too_many_arguments)]
-pub fn render(
+pub fn render_sampled(
     scene: &Scene,
     mesh: &Mesh,
     rays: &SceneRays,
@@ -411,7 +445,7 @@ pub fn render(
     cam: &PinholeCamera,
     opts: &Options,
     progress: &dyn Progress,
-) -> (Image, u64) {
+) -> (Image, Sampling) {
     let (w, h) = (opts.width, opts.height);
     let s = opts.spp_axis.max(1);
     let all = s * s;
@@ -548,12 +582,15 @@ pub fn render(
     }
     progress.end();
     let mut img = Image::new(w, h);
+    let mut sampling = Sampling { rays: total_rays, ..Default::default() };
     for (px, acc) in img.pixels.iter_mut().zip(&sums) {
         if acc.taken > 0 {
             *px = acc.radiance * (1.0 / acc.taken as f64);
+            sampling.positions += u64::from(acc.taken);
+            sampling.pixels += 1;
         }
     }
-    (img, total_rays)
+    (img, sampling)
 }
 
 /// The irradiance at `p` (normal `n`, on polygon `patch`) read by cosine-distributed rays
@@ -689,6 +726,19 @@ pub(crate) mod tests {
         let (img, rays) = solved.render_gather(&cam, &adaptive, &tracer, &indirect, &crate::NoProgress);
         let worst = img.pixels.iter().map(|p| ((p.max_element() - 2.0) / 2.0).abs()).fold(0.0, f64::max);
         assert!(worst < 2e-3, "worst pixel {worst:e} from L = 2");
+        let cam_p = crate::render::PinholeCamera::new(&cam, adaptive.width, adaptive.height);
+        let (_, sampled) = super::render_sampled(
+            &solved.scene,
+            &solved.mesh,
+            &solved.rays,
+            &tracer,
+            &indirect,
+            &cam_p,
+            &adaptive,
+            &crate::NoProgress,
+        );
+        assert_eq!((sampled.rays, sampled.pixels), (rays, 24 * 24));
+        assert_eq!(sampled.positions_per_pixel(), super::ADAPTIVE_FIRST as f64);
         // 8 of 36 positions per pixel.
         let share = rays as f64 / all_rays as f64;
         assert!((share - 8.0 / 36.0).abs() < 0.02, "{rays} of {all_rays} rays: {share}");
