@@ -359,6 +359,10 @@ struct PixelDraw {
     pat: Patterns,
 }
 
+/// Bytes per pixel the final gather holds besides the image: its [`PixelSums`] and, for
+/// adaptive sampling, each pixel's mean, own variance and neighbourhood variance.
+pub const PIXEL_STATE_BYTES: u64 = std::mem::size_of::<PixelSums>() as u64 + 3 * 8;
+
 /// One pixel's running sums: radiance, and the luminance's first two moments over the
 /// positions taken.
 #[derive(Clone, Copy, Default)]
@@ -515,11 +519,13 @@ pub fn render_sampled(
     if adaptive && !stopped.load(Ordering::Relaxed) {
         let floor = ADAPTIVE_FLOOR * typical_luminance(&sums);
         // Edges (ADAPTIVE_CONTRAST) take every position, whatever their own variance.
-        let mean: Vec<f64> = sums.iter().map(|p| p.lum / f64::from(p.taken.max(1))).collect();
+        let mean: Vec<f64> = sums.par_iter().with_min_len(4096).map(|p| p.lum / f64::from(p.taken.max(1))).collect();
         let contrast = ADAPTIVE_CONTRAST;
         // The per-position variance that judges a pixel: the largest around it.
-        let own: Vec<f64> = sums.iter().map(PixelSums::variance).collect();
+        let own: Vec<f64> = sums.par_iter().with_min_len(4096).map(PixelSums::variance).collect();
         let pooled: Vec<f64> = (0..w * h)
+            .into_par_iter()
+            .with_min_len(4096)
             .map(|k| {
                 let (x, y) = (k % w, k / w);
                 let r = ADAPTIVE_POOL_RADIUS;

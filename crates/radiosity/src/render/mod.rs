@@ -42,14 +42,16 @@ impl Image {
 }
 
 /// Bytes of the buffers one view's renderer allocates for a `width × height` image with
-/// `spp_axis²` samples per pixel: the radiance image (3 × f64 per pixel) and, for the
-/// Gouraud/flat renderer (`gather == false`), its supersampled z-buffer of element ids and
-/// parameters (4 + 8 bytes per sample). Saturating, so absurd sizes compare as huge.
+/// `spp_axis²` samples per pixel: the radiance image (3 × f64 per pixel) and, for the final
+/// gather (`gather == true`), its per-pixel sums and the adaptive sampling's three maps
+/// ([`gather::PIXEL_STATE_BYTES`]), or for the Gouraud/flat renderer its supersampled
+/// z-buffer of element ids and parameters (4 + 8 bytes per sample). Saturating, so absurd
+/// sizes compare as huge.
 pub fn image_memory_bytes(width: usize, height: usize, spp_axis: usize, gather: bool) -> u64 {
     let pixels = (width as u64).saturating_mul(height as u64);
     let image = pixels.saturating_mul(std::mem::size_of::<Rgb>() as u64);
     if gather {
-        image
+        image.saturating_add(pixels.saturating_mul(gather::PIXEL_STATE_BYTES))
     } else {
         let s = spp_axis.max(1) as u64;
         image.saturating_add(pixels.saturating_mul(s * s).saturating_mul(12))
@@ -194,7 +196,7 @@ mod tests {
 
     #[test]
     fn image_memory_counts_every_buffer() {
-        assert_eq!(image_memory_bytes(100, 10, 6, true), 24_000);
+        assert_eq!(image_memory_bytes(100, 10, 6, true), 24_000 + 1000 * gather::PIXEL_STATE_BYTES);
         assert_eq!(image_memory_bytes(100, 10, 3, false), 24_000 + 9 * 12_000);
         assert!(image_memory_bytes(65535, 65535, 64, false) > 1 << 40);
     }
