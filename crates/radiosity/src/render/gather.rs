@@ -497,25 +497,31 @@ pub fn render_sampled(
         }
         nrays
     };
+    // One pass over the image's rows, in parallel: `row` shades one row and returns its rays;
+    // a stop request ends the pass (rows begun finish).
+    let pass = |sums: &mut [PixelSums], row: &(dyn Fn(usize, &mut [PixelSums], &mut PixelDraw) -> u64 + Sync)| -> u64 {
+        sums.par_chunks_mut(w)
+            .enumerate()
+            .map(|(y, pixels)| {
+                if stopped.load(Ordering::Relaxed) || progress.should_stop() {
+                    stopped.store(true, Ordering::Relaxed);
+                    return 0;
+                }
+                let nrays = row(y, pixels, &mut PixelDraw::default());
+                progress.advance(1);
+                nrays
+            })
+            .sum()
+    };
     let mut sums = vec![PixelSums::default(); w * h];
-    let mut total_rays: u64 = sums
-        .par_chunks_mut(w)
-        .enumerate()
-        .map(|(y, row)| {
-            if stopped.load(Ordering::Relaxed) || progress.should_stop() {
-                stopped.store(true, Ordering::Relaxed);
-                return 0;
-            }
-            let mut px = PixelDraw::default();
-            let mut nrays = 0;
-            for (x, acc) in row.iter_mut().enumerate() {
-                draw(x, y, first, &mut px);
-                nrays += take(x, y, 0, first, acc, &mut px);
-            }
-            progress.advance(1);
-            nrays
-        })
-        .sum();
+    let mut total_rays = pass(&mut sums, &|y, row, px| {
+        let mut nrays = 0;
+        for (x, acc) in row.iter_mut().enumerate() {
+            draw(x, y, first, px);
+            nrays += take(x, y, 0, first, acc, px);
+        }
+        nrays
+    });
     if adaptive && !stopped.load(Ordering::Relaxed) {
         let floor = ADAPTIVE_FLOOR * typical_luminance(&sums);
         // Edges (ADAPTIVE_CONTRAST) take every position, whatever their own variance.
@@ -546,45 +552,35 @@ pub fn render_sampled(
                 || (y > 0 && differs((y - 1) * w + x))
                 || (y + 1 < h && differs((y + 1) * w + x))
         };
-        total_rays += sums
-            .par_chunks_mut(w)
-            .enumerate()
-            .map(|(y, row)| {
-                if stopped.load(Ordering::Relaxed) || progress.should_stop() {
-                    stopped.store(true, Ordering::Relaxed);
-                    return 0;
+        total_rays += pass(&mut sums, &|y, row, px| {
+            let mut nrays = 0;
+            for (x, acc) in row.iter_mut().enumerate() {
+                let from = acc.taken as usize;
+                if from == 0 || from >= all {
+                    continue;
                 }
-                let mut px = PixelDraw::default();
-                let mut nrays = 0;
-                for (x, acc) in row.iter_mut().enumerate() {
-                    let from = acc.taken as usize;
-                    if from == 0 || from >= all {
-                        continue;
-                    }
-                    let is_edge = edge(x, y);
-                    let k = y * w + x;
-                    if !is_edge && acc.converged(pooled[k], opts.noise, floor) {
-                        continue;
-                    }
-                    // The same points as the first pass's: redrawn from the pixel's stream.
-                    draw(x, y, all, &mut px);
-                    if is_edge {
-                        nrays += take(x, y, from, all, acc, &mut px);
-                        continue;
-                    }
-                    let mut from = from;
-                    // Further rounds judged by the pixel's own variance, kept no lower than the
-                    // pooled one.
-                    while from < all && !acc.converged(acc.variance().max(pooled[k]), opts.noise, floor) {
-                        let to = (from + ROUND).min(all);
-                        nrays += take(x, y, from, to, acc, &mut px);
-                        from = to;
-                    }
+                let is_edge = edge(x, y);
+                let k = y * w + x;
+                if !is_edge && acc.converged(pooled[k], opts.noise, floor) {
+                    continue;
                 }
-                progress.advance(1);
-                nrays
-            })
-            .sum::<u64>();
+                // The same points as the first pass's: redrawn from the pixel's stream.
+                draw(x, y, all, px);
+                if is_edge {
+                    nrays += take(x, y, from, all, acc, px);
+                    continue;
+                }
+                let mut from = from;
+                // Further rounds judged by the pixel's own variance, kept no lower than the
+                // pooled one.
+                while from < all && !acc.converged(acc.variance().max(pooled[k]), opts.noise, floor) {
+                    let to = (from + ROUND).min(all);
+                    nrays += take(x, y, from, to, acc, px);
+                    from = to;
+                }
+            }
+            nrays
+        });
     }
     progress.end();
     let mut img = Image::new(w, h);
