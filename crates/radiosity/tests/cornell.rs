@@ -88,7 +88,7 @@ fn cornell_box_image_matches_path_tracer() {
     assert!(e <= 0.02, "light-masked relative RMSE {:.3} %", e * 100.0);
     // Adaptive sampling (the CLI's default): the same bound with fewer rays; most of the box
     // is smooth, only edges and penumbrae take all 36 positions. Measured 1.64 % with 44 %
-    // of the rays (3.75 M against 8.58 M).
+    // of the rays (3.76 M against 8.58 M).
     let adaptive = radiosity::render::gather::Options { noise: radiosity::render::gather::DEFAULT_NOISE, ..opts };
     let (img, rays) = solved.render_gather(&camera, &adaptive, &tracer, &indirect, &NoProgress);
     let e = radiosity::output::metrics::relative_rmse_light_masked(&img, &reference).unwrap();

@@ -309,7 +309,7 @@ pub const DEFAULT_NOISE: f64 = 0.01;
 /// The mean luminance of the pixels taken so far, leaving out those brighter than 20 × the
 /// median (lamps seen directly, which the image error leaves out too).
 fn typical_luminance(sums: &[PixelSums]) -> f64 {
-    let mut lum: Vec<f64> = sums.iter().filter(|p| p.taken > 0).map(|p| p.lum / p.taken as f64).collect();
+    let mut lum: Vec<f64> = sums.iter().filter(|p| p.taken > 0).map(PixelSums::mean).collect();
     if lum.is_empty() {
         return 0.0;
     }
@@ -374,6 +374,11 @@ struct PixelSums {
 }
 
 impl PixelSums {
+    /// The mean luminance of the positions taken (0 before any).
+    fn mean(&self) -> f64 {
+        self.lum / f64::from(self.taken.max(1))
+    }
+
     /// The sample variance of the luminance of one position.
     fn variance(&self) -> f64 {
         let n = self.taken as f64;
@@ -386,8 +391,7 @@ impl PixelSums {
     /// Whether the standard error of the pixel's mean luminance, with per-position variance
     /// `var`, is within `noise` of `max(mean, floor)`.
     fn converged(&self, var: f64, noise: f64, floor: f64) -> bool {
-        let n = self.taken as f64;
-        self.taken >= 2 && var / n <= (noise * (self.lum / n).max(floor)).powi(2)
+        self.taken >= 2 && var / self.taken as f64 <= (noise * self.mean().max(floor)).powi(2)
     }
 }
 
@@ -525,8 +529,7 @@ pub fn render_sampled(
     if adaptive && !stopped.load(Ordering::Relaxed) {
         let floor = ADAPTIVE_FLOOR * typical_luminance(&sums);
         // Edges (ADAPTIVE_CONTRAST) take every position, whatever their own variance.
-        let mean: Vec<f64> = sums.par_iter().with_min_len(4096).map(|p| p.lum / f64::from(p.taken.max(1))).collect();
-        let contrast = ADAPTIVE_CONTRAST;
+        let mean: Vec<f64> = sums.par_iter().with_min_len(4096).map(PixelSums::mean).collect();
         // The per-position variance that judges a pixel: the largest around it.
         let own: Vec<f64> = sums.par_iter().with_min_len(4096).map(PixelSums::variance).collect();
         let pooled: Vec<f64> = (0..w * h)
@@ -546,7 +549,7 @@ pub fn render_sampled(
             .collect();
         let edge = |x: usize, y: usize| {
             let m = mean[y * w + x];
-            let differs = |n: usize| (m - mean[n]).abs() > contrast * m.max(mean[n]).max(floor);
+            let differs = |n: usize| (m - mean[n]).abs() > ADAPTIVE_CONTRAST * m.max(mean[n]).max(floor);
             (x > 0 && differs(y * w + x - 1))
                 || (x + 1 < w && differs(y * w + x + 1))
                 || (y > 0 && differs((y - 1) * w + x))
