@@ -297,9 +297,19 @@ pub const ADAPTIVE_FLOOR: f64 = 0.25;
 /// that the first positions of one of them missed.
 pub const ADAPTIVE_CONTRAST: f64 = 0.1;
 
+/// ... and by more than this many standard errors of their difference: a difference
+/// that noise explains is left to the variance test. Without it, noise alone made edges of
+/// a third of the classroom's pixels (95 k of 262 k after 8 positions; 36 k with it, the
+/// image unchanged) and their variance, between surfaces rather than of one estimate,
+/// spread over their neighbours through [`ADAPTIVE_POOL_RADIUS`].
+pub const ADAPTIVE_SIGNIFICANCE: f64 = 3.0;
+
 /// The per-position variance that judges a pixel is the largest over the `(2r+1)²`
 /// pixels around it, `r` this: eight positions alone miss the rare bright sample of a
-/// heavy-tailed estimate (a lamp picked with a poor guide), their neighbours see it.
+/// heavy-tailed estimate (a lamp picked with a poor guide), their neighbours see it. Edge
+/// pixels are left out of their neighbours' pool (their variance is that of the surfaces
+/// they straddle). The mean over the pool instead of the largest: classroom 27.0 of 36
+/// positions per pixel, 3.45 % against its 12 × 12 render, against 29.3 and 3.37 %.
 pub const ADAPTIVE_POOL_RADIUS: usize = 2;
 
 /// The default of [`Options::noise`] (the CLI's `--pixel-noise`): a pixel stops once the
@@ -360,8 +370,9 @@ struct PixelDraw {
 }
 
 /// Bytes per pixel the final gather holds besides the image: its [`PixelSums`] and, for
-/// adaptive sampling, each pixel's mean, own variance and neighbourhood variance.
-pub const PIXEL_STATE_BYTES: u64 = std::mem::size_of::<PixelSums>() as u64 + 3 * 8;
+/// adaptive sampling, each pixel's mean, own variance, squared standard error,
+/// neighbourhood variance and edge flag.
+pub const PIXEL_STATE_BYTES: u64 = std::mem::size_of::<PixelSums>() as u64 + 4 * 8 + 1;
 
 /// One pixel's running sums: radiance, and the luminance's first two moments over the
 /// positions taken.
@@ -530,8 +541,20 @@ pub fn render_sampled(
         let floor = ADAPTIVE_FLOOR * typical_luminance(&sums);
         // Edges (ADAPTIVE_CONTRAST) take every position, whatever their own variance.
         let mean: Vec<f64> = sums.par_iter().with_min_len(4096).map(PixelSums::mean).collect();
-        // The per-position variance that judges a pixel: the largest around it.
+        // The per-position variance that judges a pixel: the largest around it, edges
+        // (ADAPTIVE_CONTRAST and ADAPTIVE_SIGNIFICANCE) left out.
         let own: Vec<f64> = sums.par_iter().with_min_len(4096).map(PixelSums::variance).collect();
+        let err2: Vec<f64> = sums.par_iter().zip(&own).with_min_len(4096).map(|(p, v)| v / f64::from(p.taken.max(1))).collect();
+        let edge = |x: usize, y: usize| {
+            let k = y * w + x;
+            let m = mean[k];
+            let differs = |n: usize| {
+                let d = m - mean[n];
+                d.abs() > ADAPTIVE_CONTRAST * m.max(mean[n]).max(floor) && d * d > ADAPTIVE_SIGNIFICANCE.powi(2) * (err2[k] + err2[n])
+            };
+            (x > 0 && differs(k - 1)) || (x + 1 < w && differs(k + 1)) || (y > 0 && differs(k - w)) || (y + 1 < h && differs(k + w))
+        };
+        let edges: Vec<bool> = (0..w * h).into_par_iter().with_min_len(4096).map(|k| edge(k % w, k / w)).collect();
         let pooled: Vec<f64> = (0..w * h)
             .into_par_iter()
             .with_min_len(4096)
@@ -541,20 +564,14 @@ pub fn render_sampled(
                 let mut most = own[k];
                 for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
                     for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
-                        most = most.max(own[yy * w + xx]);
+                        if !edges[yy * w + xx] {
+                            most = most.max(own[yy * w + xx]);
+                        }
                     }
                 }
                 most
             })
             .collect();
-        let edge = |x: usize, y: usize| {
-            let m = mean[y * w + x];
-            let differs = |n: usize| (m - mean[n]).abs() > ADAPTIVE_CONTRAST * m.max(mean[n]).max(floor);
-            (x > 0 && differs(y * w + x - 1))
-                || (x + 1 < w && differs(y * w + x + 1))
-                || (y > 0 && differs((y - 1) * w + x))
-                || (y + 1 < h && differs((y + 1) * w + x))
-        };
         total_rays += pass(&mut sums, &|y, row, px| {
             let mut nrays = 0;
             for (x, acc) in row.iter_mut().enumerate() {
@@ -562,7 +579,7 @@ pub fn render_sampled(
                 if from == 0 || from >= all {
                     continue;
                 }
-                let is_edge = edge(x, y);
+                let is_edge = edges[y * w + x];
                 let k = y * w + x;
                 if !is_edge && acc.converged(pooled[k], opts.noise, floor) {
                     continue;
