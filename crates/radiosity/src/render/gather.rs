@@ -105,25 +105,39 @@ pub enum Indirect {
     },
 }
 
-/// The first `count` of one pixel's stratified points: jittered cells of a `side × side`
-/// grid over [0,1)², in random order (a partial Fisher–Yates shuffle), so that consecutive
-/// chunks (one per pixel position) each spread over the whole domain while all `side²`
-/// together stay stratified. The draws for `count` points are a prefix of those for any
-/// larger count, so a pixel can take more positions later from the same stream (adaptive
-/// sampling) and draws nothing for positions it never takes.
-fn pixel_pattern(side: usize, count: usize, rng: &mut crate::sampling::Rng, cells: &mut Vec<u32>, out: &mut Vec<(f64, f64)>) {
+/// One pixel's stratified points for its first `positions` positions, `axis²` per
+/// position: the unit square is split into `axis × axis` strata, each stratum into
+/// `side × side` cells (`side²` = the pixel's positions). Position `k` takes one jittered
+/// cell in every stratum — the `k`-th of that stratum's cells in a random order (a partial
+/// Fisher–Yates shuffle per stratum) — so each position's points are stratified over the
+/// whole square, any set of positions is stratified stratum by stratum, and all `side²`
+/// positions together take every one of the `(side·axis)²` cells. (Until 2026-12-05 a
+/// position took `axis²` cells drawn from the whole grid: stratified only once every
+/// position was taken, so the per-position variance that adaptive sampling reads was that
+/// of random points.) Position `k`'s points are `out[k·axis² .. (k+1)·axis²]`. The draws for
+/// some positions are a prefix of those for more, so a pixel can take more positions later
+/// from the same stream (adaptive sampling) and draws nothing for positions it never
+/// takes.
+fn pixel_pattern(side: usize, axis: usize, positions: usize, rng: &mut crate::sampling::Rng, cells: &mut Vec<u32>, out: &mut Vec<(f64, f64)>) {
     use rand::RngExt;
-    let n = side * side;
-    let count = count.min(n);
+    let per = side * side;
+    let positions = positions.min(per);
+    let strata = axis * axis;
     cells.clear();
-    cells.extend(0..n as u32);
+    for _ in 0..strata {
+        cells.extend(0..per as u32);
+    }
     out.clear();
-    let inv = 1.0 / side as f64;
-    for i in 0..count {
-        cells.swap(i, rng.random_range(i..n));
-        let c = cells[i] as usize;
-        let (a, b): (f64, f64) = (rng.random(), rng.random());
-        out.push((((c % side) as f64 + a) * inv, ((c / side) as f64 + b) * inv));
+    let fine = 1.0 / (side * axis) as f64;
+    for k in 0..positions {
+        for t in 0..strata {
+            let own = &mut cells[t * per..(t + 1) * per];
+            own.swap(k, rng.random_range(k..per));
+            let c = own[k] as usize;
+            let (i, j) = ((t % axis) * side + c % side, (t / axis) * side + c / side);
+            let (a, b): (f64, f64) = (rng.random(), rng.random());
+            out.push(((i as f64 + a) * fine, (j as f64 + b) * fine));
+        }
     }
 }
 
@@ -192,16 +206,15 @@ impl<'a> Shader<'a> {
         use rand::RngExt;
         let base: u64 = rng.random();
         let npat = if self.ems.len() <= LOOP_EMITTERS { self.ems.len() } else { 1 };
-        let (m2, g2) = (self.shadow_axis * self.shadow_axis, self.gather_axis * self.gather_axis);
         pat.shadows.resize_with(npat, Vec::new);
         for (t, p) in pat.shadows.iter_mut().enumerate() {
-            pixel_pattern(side * self.shadow_axis, positions * m2, &mut pattern_rng(base, t as u64 + 2), &mut pat.cells, p);
+            pixel_pattern(side, self.shadow_axis, positions, &mut pattern_rng(base, t as u64 + 2), &mut pat.cells, p);
         }
         if self.gather_axis > 0 {
-            pixel_pattern(side * self.gather_axis, positions * g2, &mut pattern_rng(base, 0), &mut pat.cells, &mut pat.gather);
+            pixel_pattern(side, self.gather_axis, positions, &mut pattern_rng(base, 0), &mut pat.cells, &mut pat.gather);
         }
         if self.sun.is_some() {
-            pixel_pattern(side * self.shadow_axis, positions * m2, &mut pattern_rng(base, 1), &mut pat.cells, &mut pat.sun);
+            pixel_pattern(side, self.shadow_axis, positions, &mut pattern_rng(base, 1), &mut pat.cells, &mut pat.sun);
         }
     }
 
@@ -712,6 +725,31 @@ pub(crate) mod tests {
         let most = 3 + rayon::current_num_threads() as u64;
         assert!(stop.done() <= most, "{} rows after a stop at 3", stop.done());
         assert_eq!(lit_rows(&img) as u64, stop.done());
+    }
+
+    /// Each position's points fall one in each of the `axis × axis` strata, all positions
+    /// together one in each of the `(side·axis)²` cells, and the points of fewer positions
+    /// are a prefix of those of more.
+    #[test]
+    fn pixel_pattern_stratifies_each_position_and_the_whole_pixel() {
+        for (side, axis) in [(1usize, 2usize), (6, 2), (6, 4), (3, 3)] {
+            let (mut cells, mut all, mut few) = (Vec::new(), Vec::new(), Vec::new());
+            let per = axis * axis;
+            super::pixel_pattern(side, axis, side * side, &mut super::pattern_rng(9, 0), &mut cells, &mut all);
+            super::pixel_pattern(side, axis, 3, &mut super::pattern_rng(9, 0), &mut cells, &mut few);
+            assert_eq!(all.len(), side * side * per);
+            assert_eq!(few.len(), side.pow(2).min(3) * per);
+            assert_eq!(&all[..few.len()], &few[..], "side {side}, axis {axis}: not a prefix");
+            for (k, pos) in all.chunks(per).enumerate() {
+                let mut strata: Vec<usize> = pos.iter().map(|&(u, v)| (u * axis as f64) as usize + axis * (v * axis as f64) as usize).collect();
+                strata.sort_unstable();
+                assert_eq!(strata, (0..per).collect::<Vec<_>>(), "side {side}, axis {axis}: position {k}");
+            }
+            let n = side * axis;
+            let mut fine: Vec<usize> = all.iter().map(|&(u, v)| (u * n as f64) as usize + n * (v * n as f64) as usize).collect();
+            fine.sort_unstable();
+            assert_eq!(fine, (0..n * n).collect::<Vec<_>>(), "side {side}, axis {axis}: cells");
+        }
     }
 
     /// Every prefix of whole rounds takes the same number of cells from each quadrant, and
