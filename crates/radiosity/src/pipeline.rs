@@ -371,22 +371,33 @@ impl Prepared {
                         progress,
                     )?;
                     let mut warnings = Vec::new();
+                    let worst_source = h.stats.worst_row.and_then(|i| mesh.elements.get(i as usize)).and_then(|e| scene.polygons[e.patch as usize].loc.as_ref()).map(|l| l.to_string());
                     if h.stats.rows_scaled > 0 {
+                        let at = worst_source.as_deref().map(|s| format!(" (polygon at {s})")).unwrap_or_default();
                         let w = format!(
-                            "hierarchical links: {} element(s) whose links summed above 1 were scaled to 1 (largest raw sum {:.4}); \
+                            "hierarchical links: {} element(s) whose links summed above 1 were scaled to 1 (largest raw sum {:.4} at element {}{at}); \
                              this happens near coincident, touching or interpenetrating surfaces",
-                            h.stats.rows_scaled, h.stats.max_row_sum
+                            h.stats.rows_scaled,
+                            h.stats.max_row_sum,
+                            h.stats.worst_row.unwrap_or(0)
                         );
                         progress.warning(&w);
                         warnings.push(w);
                     }
+                    let guard = form_factor::RowGuard {
+                        rows_corrected: h.stats.rows_scaled,
+                        max_row_sum: h.stats.max_row_sum,
+                        worst_row: h.stats.worst_row.map(|i| i as usize),
+                        worst_source,
+                        ..Default::default()
+                    };
                     let stats = form_factor::Stats {
                         method: format!("hierarchical ({} leaves)", settings.form_factors.method.name()),
                         nonzeros: h.stats.links,
                         rays: rays_cast,
                         seconds: t.elapsed().as_secs_f64(),
                         warnings,
-                        guard: Default::default(),
+                        guard,
                         hierarchy: Some(h.stats.clone()),
                     };
                     (Operator::Hierarchical(h), stats)

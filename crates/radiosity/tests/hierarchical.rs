@@ -121,6 +121,42 @@ fn furnace_with_cluster_links_is_within_one_percent() {
     assert!(e.escaped[1].abs() <= 0.01 * e.emitted[1], "{e:?}");
 }
 
+/// Issue 9 asks every guard to name what it corrected: the hierarchy's largest raw row sum
+/// (the product with x = 1 before the guard) and the element that has it reach the
+/// report's guard, with the element's source polygon, as they do for explicit rows. The
+/// classroom's links overcount at 301 elements (raw sums up to 1.45, 2026-12-05).
+#[test]
+fn the_hierarchys_row_guard_names_its_worst_element() {
+    let check = |solved: &radiosity::pipeline::Solved| {
+        let h = solved.transport.as_ref().unwrap().hierarchy().unwrap();
+        let sums = h.row_sums();
+        let open = |i: usize| h.tree.nodes[h.tree.leaf_of[i] as usize].area > 0.0;
+        let (worst, max) = (0..sums.len()).filter(|&i| open(i)).map(|i| (i, sums[i])).fold((0, f64::MIN), |a, b| if b.1 > a.1 { b } else { a });
+        let g = &solved.ff_stats.as_ref().unwrap().guard;
+        eprintln!("raw max {max:.4} at {worst}; guard {g:?}");
+        assert_eq!(h.stats.worst_row, Some(worst as u64));
+        assert_eq!(g.worst_row, Some(worst));
+        assert_eq!(g.max_row_sum, max);
+        assert_eq!(g.rows_corrected, h.stats.rows_scaled);
+        assert_eq!(g.rows_corrected, sums.iter().enumerate().filter(|&(i, &s)| open(i) && s > 1.0 + 1e-3).count() as u64);
+        g.clone()
+    };
+    let scene = furnace_with(vec![
+        box_faces(v(0.2, 0.0, 0.2), v(0.6, 0.4, 0.6), false),
+        box_faces(v(0.4, 0.2, 0.4), v(0.8, 0.6, 0.8), false),
+    ]);
+    check(&solve_scene(scene, &Settings { mesh_size: Some(0.1), ..hierarchical() }, &NoProgress).unwrap());
+    let Some(path) = common::shared("scenes/renderpark-classroom/classroom.obj") else { return };
+    let scene = radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    let solved = solve_scene(scene, &hierarchical(), &NoProgress).unwrap();
+    let g = check(&solved);
+    assert!(g.rows_corrected > 0 && g.max_row_sum > 1.0, "{g:?}");
+    let at = g.worst_source.expect("the worst element's polygon");
+    assert!(at.contains("classroom.obj:"), "{at}");
+    let w = &solved.ff_stats.as_ref().unwrap().warnings;
+    assert!(w.iter().any(|w| w.contains(&at) && w.contains(&format!("{:.4}", g.max_row_sum))), "{w:?}");
+}
+
 #[test]
 fn cornell_box_agrees_with_explicit_rows() {
     let scene = Scene::from_desc(builtin::cornell()).unwrap();

@@ -600,6 +600,8 @@ pub struct HierarchyStats {
     pub rows_scaled: u64,
     /// The largest raw leaf row sum.
     pub max_row_sum: f64,
+    /// The element with that sum.
+    pub worst_row: Option<u64>,
     /// Bytes held by the tree and the links.
     pub memory_bytes: u64,
     /// Emitting elements whose light reaches every element through exact factors instead
@@ -964,13 +966,17 @@ impl Hierarchy {
         let sums = h.row_sums();
         let mut scaled = 0;
         let mut max_sum = 0.0f64;
+        let mut worst = None;
         for (i, &s) in sums.iter().enumerate() {
             if s > 1.0 {
                 h.scale[i] = (1.0 / s) as f32;
             }
             // Covered elements (no open area) gather but count for nothing.
             if h.tree.nodes[h.tree.leaf_of[i] as usize].area > 0.0 {
-                max_sum = max_sum.max(s);
+                if s > max_sum || worst.is_none() {
+                    max_sum = s;
+                    worst = Some(i as u64);
+                }
                 if s > 1.0 + 1e-3 {
                     scaled += 1;
                 }
@@ -978,6 +984,7 @@ impl Hierarchy {
         }
         h.stats.rows_scaled = scaled;
         h.stats.max_row_sum = max_sum;
+        h.stats.worst_row = worst;
         h.stats.memory_bytes = h.memory_bytes() as u64;
     }
 
