@@ -381,7 +381,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                     seed: a.solve.seed,
                     noise: a.pixel_noise,
                 };
-                let (img, sampled) = solved.render_gather_sampled(cam, &gopts, &tracer, hv, &render_progress);
+                let (img, sampled) = solved.render_gather(cam, &gopts, &tracer, hv, &render_progress);
                 (img, sampled.rays, Some(sampled.positions_per_pixel()))
             }
             None => {

@@ -859,21 +859,9 @@ impl Solved {
     }
 
     /// Renders one view by final gathering (direct light per pixel, indirect from the
-    /// solution as [`Solved::indirect`] gives it). Returns the image and the rays cast.
+    /// solution as [`Solved::indirect`] gives it). Returns the image and what it took
+    /// (rays, positions).
     pub fn render_gather(
-        &self,
-        camera: &Camera,
-        opts: &gather::Options,
-        tracer: &ElementTracer,
-        indirect: &gather::Indirect,
-        progress: &dyn Progress,
-    ) -> (Image, u64) {
-        let (img, s) = self.render_gather_sampled(camera, opts, tracer, indirect, progress);
-        (img, s.rays)
-    }
-
-    /// As [`Solved::render_gather`], returning what the image took (rays, positions).
-    pub fn render_gather_sampled(
         &self,
         camera: &Camera,
         opts: &gather::Options,
@@ -882,7 +870,7 @@ impl Solved {
         progress: &dyn Progress,
     ) -> (Image, gather::Sampling) {
         let cam = PinholeCamera::new(camera, opts.width, opts.height);
-        gather::render_sampled(&self.scene, &self.mesh, &self.rays, tracer, indirect, &cam, opts, progress)
+        gather::render(&self.scene, &self.mesh, &self.rays, tracer, indirect, &cam, opts, progress)
     }
 
     /// Energy bookkeeping: emitted = absorbed + escaped + unshot (see

@@ -80,7 +80,8 @@ fn cornell_box_image_matches_path_tracer() {
     let indirect = solved.indirect(false);
     let opts =
         radiosity::render::gather::Options { width: 256, height: 256, spp_axis: 6, shadow_axis: 2, gather_axis: 0, seed: 0, noise: 0.0 };
-    let (img, all_rays) = solved.render_gather(&camera, &opts, &tracer, &indirect, &NoProgress);
+    let (img, all) = solved.render_gather(&camera, &opts, &tracer, &indirect, &NoProgress);
+    let all_rays = all.rays;
     let e = radiosity::output::metrics::relative_rmse_light_masked(&img, &reference).unwrap();
     eprintln!("light-masked relative RMSE {:.3} %", e * 100.0);
     // Measured 1.63 % (the reference's own noise is 0.85 %); PRODUCT.md and BENCHMARKS.md
@@ -90,7 +91,8 @@ fn cornell_box_image_matches_path_tracer() {
     // is smooth, only edges and penumbrae take all 36 positions. Measured 1.64 % with 44 %
     // of the rays (3.76 M against 8.58 M).
     let adaptive = radiosity::render::gather::Options { noise: radiosity::render::gather::DEFAULT_NOISE, ..opts };
-    let (img, rays) = solved.render_gather(&camera, &adaptive, &tracer, &indirect, &NoProgress);
+    let (img, sampled) = solved.render_gather(&camera, &adaptive, &tracer, &indirect, &NoProgress);
+    let rays = sampled.rays;
     let e = radiosity::output::metrics::relative_rmse_light_masked(&img, &reference).unwrap();
     eprintln!("adaptive: light-masked relative RMSE {:.3} %, {rays} rays against {all_rays}", e * 100.0);
     assert!(e <= 0.02, "adaptive: light-masked relative RMSE {:.3} %", e * 100.0);

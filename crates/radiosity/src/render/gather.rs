@@ -383,9 +383,8 @@ struct PixelDraw {
 }
 
 /// Bytes per pixel the final gather holds besides the image: its [`PixelSums`] and, for
-/// adaptive sampling, each pixel's mean, own variance, squared standard error,
-/// neighbourhood variance and edge flag.
-pub const PIXEL_STATE_BYTES: u64 = std::mem::size_of::<PixelSums>() as u64 + 4 * 8 + 1;
+/// adaptive sampling, each pixel's own and neighbourhood variance and its edge flag.
+pub const PIXEL_STATE_BYTES: u64 = std::mem::size_of::<PixelSums>() as u64 + 2 * 8 + 1;
 
 /// One pixel's running sums: radiance, and the luminance's first two moments over the
 /// positions taken.
@@ -438,23 +437,7 @@ impl Sampling {
 }
 
 /// Renders by final gathering, with the indirect light from `indirect` (see the module
-/// docs). Returns the image and the rays cast ([`render_sampled`] also counts positions).
-#[allow(clippy::too_many_arguments)]
-pub fn render(
-    scene: &Scene,
-    mesh: &Mesh,
-    rays: &SceneRays,
-    tracer: &ElementTracer,
-    indirect: &Indirect,
-    cam: &PinholeCamera,
-    opts: &Options,
-    progress: &dyn Progress,
-) -> (Image, u64) {
-    let (img, s) = render_sampled(scene, mesh, rays, tracer, indirect, cam, opts, progress);
-    (img, s.rays)
-}
-
-/// As [`render`], returning what the image took.
+/// docs). Returns the image and what it took (rays, positions).
 ///
 /// With `opts.noise > 0` the sampling is adaptive: every pixel first takes
 /// [`ADAPTIVE_FIRST`] of its `spp²` positions (whole rounds of one per quadrant, see
@@ -468,7 +451,7 @@ pub fn render(
 /// and rays are the same as without adaptivity, in the same order, so `noise = 0` draws the
 /// fixed-sampling image.
 #[allow(clippy::too_many_arguments)]
-pub fn render_sampled(
+pub fn render(
     scene: &Scene,
     mesh: &Mesh,
     rays: &SceneRays,
@@ -552,18 +535,18 @@ pub fn render_sampled(
     });
     if adaptive && !stopped.load(Ordering::Relaxed) {
         let floor = ADAPTIVE_FLOOR * typical_luminance(&sums);
-        // Edges (ADAPTIVE_CONTRAST) take every position, whatever their own variance.
-        let mean: Vec<f64> = sums.par_iter().with_min_len(4096).map(PixelSums::mean).collect();
         // The per-position variance that judges a pixel: the largest around it, edges
-        // (ADAPTIVE_CONTRAST and ADAPTIVE_SIGNIFICANCE) left out.
+        // left out.
         let own: Vec<f64> = sums.par_iter().with_min_len(4096).map(PixelSums::variance).collect();
-        let err2: Vec<f64> = sums.par_iter().zip(&own).with_min_len(4096).map(|(p, v)| v / f64::from(p.taken.max(1))).collect();
+        // Edges (ADAPTIVE_CONTRAST, ADAPTIVE_SIGNIFICANCE) take every position, whatever
+        // their own variance.
+        let se2 = |i: usize| own[i] / f64::from(sums[i].taken.max(1));
         let edge = |x: usize, y: usize| {
             let k = y * w + x;
-            let m = mean[k];
             let differs = |n: usize| {
-                let d = m - mean[n];
-                d.abs() > ADAPTIVE_CONTRAST * m.max(mean[n]).max(floor) && d * d > ADAPTIVE_SIGNIFICANCE.powi(2) * (err2[k] + err2[n])
+                let (m, mn) = (sums[k].mean(), sums[n].mean());
+                let d = m - mn;
+                d.abs() > ADAPTIVE_CONTRAST * m.max(mn).max(floor) && d * d > ADAPTIVE_SIGNIFICANCE.powi(2) * (se2(k) + se2(n))
             };
             (x > 0 && differs(k - 1)) || (x + 1 < w && differs(k + 1)) || (y > 0 && differs(k - w)) || (y + 1 < h && differs(k + w))
         };
@@ -592,8 +575,8 @@ pub fn render_sampled(
                 if from == 0 || from >= all {
                     continue;
                 }
-                let is_edge = edges[y * w + x];
                 let k = y * w + x;
+                let is_edge = edges[k];
                 if !is_edge && acc.converged(pooled[k], opts.noise, floor) {
                     continue;
                 }
@@ -782,23 +765,14 @@ pub(crate) mod tests {
         let indirect = solved.indirect(true);
         let fixed = super::Options { width: 24, height: 24, spp_axis: 6, shadow_axis: 1, gather_axis: 1, seed: 3, noise: 0.0 };
         let adaptive = super::Options { noise: super::DEFAULT_NOISE, ..fixed };
-        let (_, all_rays) = solved.render_gather(&cam, &fixed, &tracer, &indirect, &crate::NoProgress);
-        let (img, rays) = solved.render_gather(&cam, &adaptive, &tracer, &indirect, &crate::NoProgress);
+        let (_, all) = solved.render_gather(&cam, &fixed, &tracer, &indirect, &crate::NoProgress);
+        let (img, sampled) = solved.render_gather(&cam, &adaptive, &tracer, &indirect, &crate::NoProgress);
         let worst = img.pixels.iter().map(|p| ((p.max_element() - 2.0) / 2.0).abs()).fold(0.0, f64::max);
         assert!(worst < 2e-3, "worst pixel {worst:e} from L = 2");
-        let cam_p = crate::render::PinholeCamera::new(&cam, adaptive.width, adaptive.height);
-        let (_, sampled) = super::render_sampled(
-            &solved.scene,
-            &solved.mesh,
-            &solved.rays,
-            &tracer,
-            &indirect,
-            &cam_p,
-            &adaptive,
-            &crate::NoProgress,
-        );
-        assert_eq!((sampled.rays, sampled.pixels), (rays, 24 * 24));
+        let (rays, all_rays) = (sampled.rays, all.rays);
+        assert_eq!((sampled.pixels, all.pixels), (24 * 24, 24 * 24));
         assert_eq!(sampled.positions_per_pixel(), super::ADAPTIVE_FIRST as f64);
+        assert_eq!(all.positions_per_pixel(), 36.0);
         // 8 of 36 positions per pixel.
         let share = rays as f64 / all_rays as f64;
         assert!((share - 8.0 / 36.0).abs() < 0.02, "{rays} of {all_rays} rays: {share}");
@@ -820,7 +794,8 @@ pub(crate) mod tests {
         for (gathered, axis) in [(true, 1), (true, 3), (false, 0)] {
             let opts = super::Options { width: 24, height: 24, spp_axis: 2, shadow_axis: 1, gather_axis: axis, seed: 3, noise: 0.0 };
             let indirect = solved.indirect(gathered);
-            let (img, rays) = solved.render_gather(&cam, &opts, &tracer, &indirect, &crate::NoProgress);
+            let (img, sampled) = solved.render_gather(&cam, &opts, &tracer, &indirect, &crate::NoProgress);
+            let rays = sampled.rays;
             let worst = img.pixels.iter().map(|p| ((p.max_element() - expect) / expect).abs()).fold(0.0, f64::max);
             eprintln!("gathered {gathered} ×{axis}: worst pixel {worst:e}");
             assert!(worst < 2e-3, "gathered {gathered} ×{axis}: worst pixel {worst:e} from L = {expect}");
