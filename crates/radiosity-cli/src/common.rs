@@ -37,8 +37,9 @@ pub struct SolveFlags {
     pub ff: FormFactorTuning,
     /// Transport operator: rows (a row of form factors per element: n² time and memory,
     /// every solver), hierarchical (links between clusters, patches and elements:
-    /// n log n; jacobi and the stochastic solvers), or auto (hierarchical above 50000
-    /// elements when the solver and form-factor method allow it; said at start).
+    /// n log n; jacobi and the stochastic solvers), or auto (hierarchical from 256 input
+    /// polygons or above 50000 elements when the solver and form-factor method allow it;
+    /// said at start).
     #[arg(long, value_name = "KIND", default_value = "auto")]
     pub transport: String,
     /// Hierarchical: a link is accepted when (size of receiver + size of source) / distance

@@ -74,9 +74,10 @@ pub struct RenderArgs {
     /// Final gather: indirect rays per pixel sample, as N × N, each reading the reflected
     /// radiosity of the element it meets; 0 interpolates the indirect light from the mesh's
     /// vertices instead (no rays, no noise; as exact as the form factors, as coarse as the
-    /// mesh) [default: 2 on the hierarchical transport and for the stochastic solvers (4
-    /// under a sky, whose direct light these rays also estimate), 0 on form-factor rows
-    /// (where 4 × 4 rays per sample estimate a sky)]
+    /// mesh) [default: 2 on the hierarchical transport with a minimum link size (above
+    /// 50000 elements) and for the stochastic solvers (4 under a sky, whose direct light
+    /// these rays also estimate), 0 on form-factor rows and on a hierarchy refined down to
+    /// the elements (where 4 × 4 rays per sample estimate a sky)]
     #[arg(long, value_name = "N")]
     pub gather_rays: Option<usize>,
     /// Final gather, adaptive sampling: a pixel stops taking samples (after 8, in rounds of

@@ -180,10 +180,12 @@ fn prepare(
     let t = Instant::now();
     let size = settings.mesh_size.unwrap_or_else(|| mesh::default_size(&scene));
     let count = mesh::count_uniform(&scene, size);
-    let kind = resolve_transport(settings, count, any_solver);
+    let patches = scene.polygons.len() as u64;
+    let kind = resolve_transport(settings, count, patches, any_solver);
     if settings.transport == transport::Kind::Auto && kind == transport::Kind::Hierarchical {
         progress.message(&format!(
-            "transport: {kind} ({count} elements; auto picks hierarchical above {} for jacobi and the stochastic solvers)",
+            "transport: {kind} ({patches} polygons, {count} elements; auto picks hierarchical from {} polygons or above {} elements for jacobi and the stochastic solvers)",
+            transport::AUTO_PATCHES,
             transport::AUTO_ELEMENTS
         ));
     }
@@ -530,15 +532,17 @@ fn external_irradiance(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: 
     Ok(s)
 }
 
-/// The operator `settings.transport` means for a mesh of `count` elements: auto picks
-/// hierarchical above [`transport::AUTO_ELEMENTS`] when the solver (not every solver:
+/// The operator `settings.transport` means for a mesh of `count` elements cut from `patches`
+/// input polygons: auto picks hierarchical from [`transport::AUTO_PATCHES`] polygons or
+/// above [`transport::AUTO_ELEMENTS`] elements when the solver (not every solver:
 /// `any_solver`) and the form-factor method allow it.
-pub fn resolve_transport(settings: &Settings, count: u64, any_solver: bool) -> transport::Kind {
+pub fn resolve_transport(settings: &Settings, count: u64, patches: u64, any_solver: bool) -> transport::Kind {
     match settings.transport {
         transport::Kind::Auto => {
             let solver_ok = !any_solver && check_transport(settings.solver, transport::Kind::Hierarchical).is_ok();
             let method_ok = settings.form_factors.method == form_factor::Method::PointSampled;
-            if count > transport::AUTO_ELEMENTS && solver_ok && method_ok && settings.adaptive.is_none() {
+            let large = count > transport::AUTO_ELEMENTS || patches >= transport::AUTO_PATCHES;
+            if large && solver_ok && method_ok && settings.adaptive.is_none() {
                 transport::Kind::Hierarchical
             } else {
                 transport::Kind::Rows
@@ -843,16 +847,19 @@ impl Solved {
     /// The default of [`gather::Options::gather_axis`] for this solution: 0 (interpolated,
     /// noise-free) on form-factor rows, where `F·(B − E)` per element is as good as the
     /// factors (Cornell box: 1.63 % against a path tracer interpolated, 3.83 % gathered with
-    /// 2 × 2 rays per position); 2 (gathered) on the hierarchical operator, whose
-    /// per-element gather is built for transport, not display (on the conference room the
-    /// interpolated first bounce is 5 % dark), and for the stochastic solvers, whose
-    /// per-element indirect estimate is noisy (classroom 15.4 % interpolated, 11.2 %
-    /// gathered). BENCHMARKS.md "Fifth round".
+    /// 2 × 2 rays per position), and on a hierarchy refined down to the elements (minimum
+    /// link size 0: office2 at 256² 4.1 % interpolated, 8.8 % gathered; the classroom 5.8 %
+    /// and 6.3 %; BENCHMARKS.md "Tenth round"); 2 (gathered) on a hierarchy with a minimum
+    /// size, whose coarse links per element are built for transport, not display (on the
+    /// conference room the interpolated first bounce is 5 % dark), and for the stochastic
+    /// solvers, whose per-element indirect estimate is noisy (classroom 15.4 % interpolated,
+    /// 11.2 % gathered). BENCHMARKS.md "Fifth round".
     /// Under a sky the gathered axis is [`gather::SKY_AXIS`]: the gather rays then also
     /// estimate the sky's direct light, whose noise dominates an open scene.
     pub fn default_gather_axis(&self) -> usize {
         match &self.transport {
             Some(Operator::Rows(_)) => 0,
+            Some(Operator::Hierarchical(h)) if h.stats.min_size <= 0.0 => 0,
             Some(Operator::Hierarchical(_)) | None if self.scene.lit_sky().is_some() => gather::SKY_AXIS,
             Some(Operator::Hierarchical(_)) | None => 2,
         }

@@ -50,17 +50,27 @@ pub enum Kind {
     /// Links between nodes of an element tree with clusters ([`Hierarchy`]): O(n log n);
     /// the solvers that only multiply by F (Jacobi) and the stochastic ones.
     Hierarchical,
-    /// Hierarchical above [`AUTO_ELEMENTS`] elements when the solver and form-factor
-    /// method allow it, else rows.
+    /// Hierarchical from [`AUTO_PATCHES`] input polygons or above [`AUTO_ELEMENTS`]
+    /// elements when the solver and form-factor method allow it, else rows.
     Auto,
 }
 
-/// Elements above which [`Kind::Auto`] picks the hierarchical operator. At the classroom's
-/// 12 230 elements it solves 3.2× faster (render 7.8 s against 16.0 s) at the same
-/// per-object median error against the path tracer (3.41 %) but a worse image (7.63 %
-/// light-masked against 5.51 %), so rows stay the choice there; at 50 000 elements rows
-/// would take minutes and gigabytes (n²), the hierarchy about 30 s (BENCHMARKS.md).
+/// Elements above which [`Kind::Auto`] picks the hierarchical operator whatever the scene:
+/// at 50 000 elements rows would take minutes and gigabytes (n²), the hierarchy about 30 s
+/// (BENCHMARKS.md).
 pub const AUTO_ELEMENTS: u64 = 50_000;
+
+/// Input polygons from which [`Kind::Auto`] picks the hierarchical operator at any element
+/// count: a furnished room, whose many small polygons the hierarchy links as clusters.
+/// Measured 2026-12-06 (BENCHMARKS.md, "Tenth round"), default mesh, per-object median
+/// error against the path tracer and 256² light-masked image error, hierarchical (indirect
+/// interpolated, [`crate::pipeline::Solved::default_gather_axis`]) against rows:
+/// the classroom (5 826 polygons, 12 230 elements) 2.35 % / 5.8 % in 6.0 s against
+/// 3.2 % / 5.7 % in 12.7 s; office2 (438 polygons, 4 757 elements) 2.0 % / 4.1 % in 1.2 s
+/// against 2.0 % / 4.2 % in 2.2 s. A box of a few large walls cut into many elements keeps
+/// rows, which are exact per element there: the Cornell box (20 polygons, 5 144 elements)
+/// is 1.99 % hierarchical against 1.63 % with rows (issue 5 asks ≤ 2 %).
+pub const AUTO_PATCHES: u64 = 256;
 
 impl Kind {
     /// Every kind.
