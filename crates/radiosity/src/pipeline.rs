@@ -373,26 +373,24 @@ impl Prepared {
                         progress,
                     )?;
                     let mut warnings = Vec::new();
-                    let worst_source = h.stats.worst_row.and_then(|i| mesh.elements.get(i as usize)).and_then(|e| scene.polygons[e.patch as usize].loc.as_ref()).map(|l| l.to_string());
+                    let mut guard = form_factor::RowGuard {
+                        rows_corrected: h.stats.rows_scaled,
+                        max_row_sum: h.stats.max_row_sum,
+                        worst_row: h.stats.worst_row.map(|i| i as usize),
+                        ..Default::default()
+                    };
+                    guard.locate_element(scene, mesh);
                     if h.stats.rows_scaled > 0 {
-                        let at = worst_source.as_deref().map(|s| format!(" (polygon at {s})")).unwrap_or_default();
                         let w = format!(
-                            "hierarchical links: {} element(s) whose links summed above 1 were scaled to 1 (largest raw sum {:.4} at element {}{at}); \
+                            "hierarchical links: {} element(s) whose links summed above 1 were scaled to 1 (largest raw sum {:.4} at element {}); \
                              this happens near coincident, touching or interpenetrating surfaces",
                             h.stats.rows_scaled,
                             h.stats.max_row_sum,
-                            h.stats.worst_row.unwrap_or(0)
+                            guard.worst_place()
                         );
                         progress.warning(&w);
                         warnings.push(w);
                     }
-                    let guard = form_factor::RowGuard {
-                        rows_corrected: h.stats.rows_scaled,
-                        max_row_sum: h.stats.max_row_sum,
-                        worst_row: h.stats.worst_row.map(|i| i as usize),
-                        worst_source,
-                        ..Default::default()
-                    };
                     let stats = form_factor::Stats {
                         method: format!("hierarchical ({} leaves)", settings.form_factors.method.name()),
                         nonzeros: h.stats.links,
@@ -848,8 +846,8 @@ impl Solved {
     /// noise-free) on form-factor rows, where `F·(B − E)` per element is as good as the
     /// factors (Cornell box: 1.63 % against a path tracer interpolated, 3.83 % gathered with
     /// 2 × 2 rays per position), and on a hierarchy refined down to the elements (minimum
-    /// link size 0: office2 at 256² 4.1 % interpolated, 8.8 % gathered; the classroom 5.8 %
-    /// and 6.3 %; BENCHMARKS.md "Tenth round"); 2 (gathered) on a hierarchy with a minimum
+    /// link size 0: office2 at 256² 4.1 % interpolated, 8.8 % gathered; the classroom 5.5 %
+    /// interpolated; BENCHMARKS.md "Tenth round"); 2 (gathered) on a hierarchy with a minimum
     /// size, whose coarse links per element are built for transport, not display (on the
     /// conference room the interpolated first bounce is 5 % dark), and for the stochastic
     /// solvers, whose per-element indirect estimate is noisy (classroom 15.4 % interpolated,

@@ -268,7 +268,7 @@ const EXPOSURE_REACH: f64 = 1.0;
 /// size 0) pairs of thin rails 2 cm apart, whose facing sides see mostly each other, came
 /// out 50–100 % too bright (raw link sums up to 1.45) and the per-object median error was
 /// 2.74 %; with the reach at the mesh size 2.36 %, worst object −15 % instead of +100 %, at
-/// no cost in time; office2 2.65 % → 1.68 % (BENCHMARKS.md, "Tenth round").
+/// no cost in time; office2 2.65 % → 1.98 % (BENCHMARKS.md, "Tenth round").
 fn exposure_reach(min_size: f64, mesh_size: f64) -> f64 {
     let size = if min_size > 0.0 { min_size } else { mesh_size };
     if size.is_finite() && size > 0.0 {

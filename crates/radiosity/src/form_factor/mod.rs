@@ -258,19 +258,30 @@ impl RowGuard {
         }
     }
 
+    /// Fills [`RowGuard::worst_source`] when the rows are `mesh`'s elements: the file and
+    /// line of the worst element's source polygon.
+    pub fn locate_element(&mut self, scene: &Scene, mesh: &Mesh) {
+        self.worst_source = self.worst_row.and_then(|i| mesh.elements.get(i)).and_then(|e| scene.polygons[e.patch as usize].loc.as_ref()).map(|l| l.to_string());
+    }
+
+    /// The worst row and, when known, its source: `"12 (polygon at cube.obj:3)"`.
+    pub fn worst_place(&self) -> String {
+        let at = self.worst_source.as_deref().map(|s| format!(" (polygon at {s})")).unwrap_or_default();
+        format!("{}{at}", self.worst_row.unwrap_or(0))
+    }
+
     /// A warning for the user when something was corrected.
     pub fn warning(&self) -> Option<String> {
         if self.rows_corrected == 0 && self.entries_dropped == 0 {
             return None;
         }
-        let at = self.worst_source.as_deref().map(|s| format!(" (polygon at {s})")).unwrap_or_default();
         Some(format!(
             "form factors: {} row(s) summed above 1 and were scaled to 1, {} non-finite or negative entries dropped; \
-             largest raw row sum {:.4} at row {}{at}; this happens near coincident, touching or interpenetrating surfaces",
+             largest raw row sum {:.4} at row {}; this happens near coincident, touching or interpenetrating surfaces",
             self.rows_corrected,
             self.entries_dropped,
             self.max_row_sum,
-            self.worst_row.unwrap_or(0)
+            self.worst_place()
         ))
     }
 }
@@ -345,9 +356,7 @@ pub fn for_each_row(
             r
         }
     };
-    if let Some(i) = guard.worst_row {
-        guard.worst_source = mesh.elements.get(i).and_then(|e| scene.polygons[e.patch as usize].loc.as_ref()).map(|l| l.to_string());
-    }
+    guard.locate_element(scene, mesh);
     guard_warning(&guard, progress, &mut warnings);
     Ok(Stats {
         method: opts.method.name().to_string(),

@@ -65,9 +65,9 @@ pub const AUTO_ELEMENTS: u64 = 50_000;
 /// Measured 2026-12-06 (BENCHMARKS.md, "Tenth round"), default mesh, per-object median
 /// error against the path tracer and 256² light-masked image error, hierarchical (indirect
 /// interpolated, [`crate::pipeline::Solved::default_gather_axis`]) against rows:
-/// the classroom (5 826 polygons, 12 230 elements) 2.35 % / 5.8 % in 6.0 s against
-/// 3.2 % / 5.7 % in 12.7 s; office2 (438 polygons, 4 757 elements) 2.0 % / 4.1 % in 1.2 s
-/// against 2.0 % / 4.2 % in 2.2 s. A box of a few large walls cut into many elements keeps
+/// the classroom (5 826 polygons, 12 230 elements) 2.35 % / 5.50 % against 3.32 % / 5.75 %,
+/// default render 9.6 s against 16.0 s; office2 (438 polygons, 4 757 elements; medians
+/// over seeds 0–4) 1.98 % / 4.08 % against 1.86 % / 4.28 %, 2.1 s against 3.1 s. A box of a few large walls cut into many elements keeps
 /// rows, which are exact per element there: the Cornell box (20 polygons, 5 144 elements)
 /// is 1.99 % hierarchical against 1.63 % with rows (issue 5 asks ≤ 2 %).
 pub const AUTO_PATCHES: u64 = 256;
