@@ -70,9 +70,10 @@ pub struct SolveFlags {
     /// that meets a surface) and its exposure (the share that gets past the minimum size);
     /// what its links bring is scaled to close its row, clusters are seen and lit from afar
     /// through their exposed faces, and rows far short of their closure are traced by rays.
-    /// 0 turns all three off.
-    #[arg(long, value_name = "N", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_CLOSURE_RAYS)]
-    pub link_closure_rays: usize,
+    /// 0 turns all three off [default: 64 where links go down to the elements, 16 where
+    /// they stop at a minimum size].
+    #[arg(long, value_name = "N")]
+    pub link_closure_rays: Option<usize>,
     /// Memory the form-factor rows or the hierarchical links may use (e.g. 8G, 512M):
     /// refused before any work when the prediction is above it [default: the memory
     /// available].

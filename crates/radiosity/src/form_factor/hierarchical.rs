@@ -137,15 +137,35 @@ pub struct Options {
     pub direct_columns: bool,
     /// Rays per element that measure its closure, the fraction of its hemisphere that
     /// meets a front face; what its links bring is scaled to close the row to it (see
-    /// [`crate::transport::Hierarchy::from_parts`]). 0: no closure fit.
-    pub closure_rays: usize,
+    /// [`crate::transport::Hierarchy::from_parts`]). 0: no closure fit. `None`:
+    /// [`default_closure_rays`] for the minimum size.
+    pub closure_rays: Option<usize>,
 }
 
 /// Elements per group whose closure rays are pooled (see [`Closure`]).
 pub const CLOSURE_GROUP: usize = 16;
 
-/// Default [`Options::closure_rays`].
+/// Default [`Options::closure_rays`] where links stop at a minimum size (above
+/// 50 000 elements by default): there the rays are a large part of the links' cost
+/// (conference room: 2.6 s at 16, 8.2 s at 64, the image and energy balance unchanged).
 pub const DEFAULT_CLOSURE_RAYS: usize = 16;
+
+/// Default [`Options::closure_rays`] where links go down to the elements (minimum size
+/// 0): there the closure fit's ray noise is most of what varies between seeds, and the
+/// rays cost little beside the links. Office2 per-object median error over seeds 0–7:
+/// 2.02 % at 16, 1.79 % at 32, 1.63 % at 64, 1.70 % at 128 (rows: 1.71 %); classroom
+/// over seeds 0–3: 2.38 % → 2.29 %, 0.03 → 0.10 s (BENCHMARKS.md, "Eleventh round").
+pub const DEFAULT_CLOSURE_RAYS_TO_ELEMENTS: usize = 64;
+
+/// The closure rays per element when none are given: [`DEFAULT_CLOSURE_RAYS_TO_ELEMENTS`]
+/// for links refined down to the elements (`min_size` 0), else [`DEFAULT_CLOSURE_RAYS`].
+pub fn default_closure_rays(min_size: f64) -> usize {
+    if min_size > 0.0 {
+        DEFAULT_CLOSURE_RAYS
+    } else {
+        DEFAULT_CLOSURE_RAYS_TO_ELEMENTS
+    }
+}
 
 /// Elements per receiver group whose hidden emitters are culled together before each
 /// element's own walk (see `super::emitter_tree`).
@@ -180,7 +200,7 @@ impl Default for Options {
             cluster_receivers: true,
             min_size: None,
             direct_columns: true,
-            closure_rays: DEFAULT_CLOSURE_RAYS,
+            closure_rays: None,
         }
     }
 }
@@ -197,8 +217,8 @@ impl Options {
         if let Some(m) = self.min_size.filter(|m| !(*m >= 0.0 && m.is_finite())) {
             return Err(Error::Invalid(format!("link minimum node size must be finite and ≥ 0, got {m}")));
         }
-        if self.closure_rays > 1024 {
-            return Err(Error::Invalid(format!("closure rays must be at most 1024, got {}", self.closure_rays)));
+        if let Some(m) = self.closure_rays.filter(|m| *m > 1024) {
+            return Err(Error::Invalid(format!("closure rays must be at most 1024, got {m}")));
         }
         if self.visibility_rays == 0 || self.visibility_rays > 1024 {
             return Err(Error::Invalid(format!("link visibility rays must be between 1 and 1024, got {}", self.visibility_rays)));
@@ -392,15 +412,16 @@ pub fn link(
     let stopped = AtomicBool::new(false);
     let total_rays = AtomicU64::new(0);
     let min_size = opts.min_size.unwrap_or(0.0);
-    let reach = if opts.closure_rays > 0 { exposure_reach(min_size, mesh.target_size) } else { 0.0 };
+    let closure_rays = opts.closure_rays.unwrap_or_else(|| default_closure_rays(min_size));
+    let reach = if closure_rays > 0 { exposure_reach(min_size, mesh.target_size) } else { 0.0 };
     let (lo, hi) = geom::bounds_3d(&mesh.positions);
     // Distance below which a point counts as on a plane.
     let eps = 1e-7 * (hi - lo).length().max(f64::MIN_POSITIVE);
     // Closure and exposure first: the exposure shapes how clusters send and receive.
-    let closure = if opts.closure_rays > 0 {
+    let closure = if closure_rays > 0 {
         let t = &tree;
         let c = per_element(n, "closure", progress, &stopped, (f32::NAN, 1.0f32), |i| {
-            let (c, o, rays) = closure(t, mesh, rays, receivers, ff.seed, opts.closure_rays, eps, reach, i as usize);
+            let (c, o, rays) = closure(t, mesh, rays, receivers, ff.seed, closure_rays, eps, reach, i as usize);
             total_rays.fetch_add(rays, Ordering::Relaxed);
             (c, o)
         })?;
@@ -536,13 +557,13 @@ pub fn link(
             }
             next += 1;
         }
-        Some(Closure { fraction: c, rays: opts.closure_rays as u32, group })
+        Some(Closure { fraction: c, rays: closure_rays as u32, group })
     } else {
         None
     };
     let mut stats = HierarchyStats {
         link_nodes: link_nodes(&tree, ctx.min_size),
-        closure_rays: opts.closure_rays as u64,
+        closure_rays: closure_rays as u64,
         min_size: ctx.min_size,
         direct_emitters: ctx.direct.as_ref().map_or(0, |d| d.len() as u64),
         direct_rays,
@@ -568,7 +589,7 @@ pub fn link(
     if let Some(fraction) = h.closure().map(|c| &c.fraction).filter(|_| traced) {
         // Elements whose rows fall far short of their closure gather by rays instead.
         let sums = h.row_sums();
-        let m = opts.closure_rays as f64;
+        let m = closure_rays as f64;
         // Also rows the fit could not bring to their closure: scaled by the largest factor
         // allowed and still short (in the conference furnace 16 293 elements read 1–9 %
         // dark between 0.877, the lower bound for 16 hits of 16, and their target of 1).
@@ -583,7 +604,7 @@ pub fn link(
             .collect();
         if !poor.is_empty() {
             let locator = crate::mesh::Locator::new(mesh);
-            let m = RAY_ROW_FACTOR * opts.closure_rays;
+            let m = RAY_ROW_FACTOR * closure_rays;
             progress.begin("ray rows", poor.len() as u64);
             let rows: Vec<(u32, Vec<(u32, f32)>)> = poor
                 .par_iter()
