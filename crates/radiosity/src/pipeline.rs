@@ -381,12 +381,19 @@ impl Prepared {
                     };
                     guard.locate_element(scene, mesh);
                     if h.stats.rows_scaled > 0 {
+                        let lifted = h.stats.rows_lifted;
+                        let by_links = h.stats.rows_scaled - lifted;
                         let w = format!(
-                            "hierarchical links: {} element(s) whose links summed above 1 were scaled to 1 (largest raw sum {:.4} at element {}); \
-                             this happens near coincident, touching or interpenetrating surfaces",
+                            "hierarchical links: {} element(s) whose links summed above 1 were scaled to 1 (largest raw sum {:.4} at element {}): \
+                             {by_links} by their links alone, which happens near coincident, touching or interpenetrating surfaces{}",
                             h.stats.rows_scaled,
                             h.stats.max_row_sum,
-                            guard.worst_place()
+                            guard.worst_place(),
+                            if lifted > 0 {
+                                format!(", and {lifted} lifted past 1 by the closure fit (their group's rows raised towards its measured closure)")
+                            } else {
+                                String::new()
+                            }
                         );
                         progress.warning(&w);
                         warnings.push(w);

@@ -598,6 +598,10 @@ pub struct HierarchyStats {
     pub terminal_links: u64,
     /// Leaves whose links summed above one and were scaled to one.
     pub rows_scaled: u64,
+    /// Of those, the leaves whose row summed to at most one before the closure fit: the
+    /// fit lifted their group towards its measured closure and them past one. The others
+    /// overcount by their links alone (coincident, touching or interpenetrating parts).
+    pub rows_lifted: u64,
     /// The largest raw leaf row sum.
     pub max_row_sum: f64,
     /// The element with that sum.
@@ -965,6 +969,7 @@ impl Hierarchy {
         // Row sums: the product with x = 1 (every node's mean is 1).
         let sums = h.row_sums();
         let mut scaled = 0;
+        let mut lifted = 0;
         let mut max_sum = 0.0f64;
         let mut worst = None;
         for (i, &s) in sums.iter().enumerate() {
@@ -979,10 +984,19 @@ impl Hierarchy {
                 }
                 if s > 1.0 + 1e-3 {
                     scaled += 1;
+                    // The row before the closure fit: its links unscaled, the direct
+                    // columns and traced rows as they are.
+                    let fixed = h.direct.as_ref().map_or(0.0, |d| d.row_sum(i)) + h.ray_rows.as_ref().map_or(0.0, |r| r.row_sum(i));
+                    let ls = f64::from(h.link_scale[i]);
+                    let before = if ls > 0.0 { (s - fixed) / ls + fixed } else { s };
+                    if before <= 1.0 + 1e-3 {
+                        lifted += 1;
+                    }
                 }
             }
         }
         h.stats.rows_scaled = scaled;
+        h.stats.rows_lifted = lifted;
         h.stats.max_row_sum = max_sum;
         h.stats.worst_row = worst;
         h.stats.memory_bytes = h.memory_bytes() as u64;
