@@ -1650,9 +1650,10 @@ fn auto_picks_the_hierarchy_for_furnished_rooms_and_matches_the_path_tracer_per_
     // default down to the elements), seed 0: classroom median 2.22 %, largest +18.0 %
     // (2.22–2.44 % over seeds 0–3); office2 median 1.42 % (1.42–1.90 % over seeds 0–7,
     // median 1.63 %; rows 1.52–2.00 %, median 1.71 %). With 16 closure rays office2's
-    // median over seeds 0–7 was 2.02 % (up to 2.83 %). Before the exposure reached the mesh size, faces hidden inside a
-    // cluster receiver (the facing sides of the classroom's rails 2 cm apart) took its light
-    // by normal alone: largest +100 %, median 2.74 %.
+    // median over seeds 0–7 was 2.02 % (up to 2.83 %). Before the exposure reached the
+    // mesh size, faces hidden inside a cluster receiver (the facing sides of the
+    // classroom's rails 2 cm apart) took its light by normal alone: largest +100 %,
+    // median 2.74 %.
     for (scene, reference, median_max, worst_max) in [
         ("scenes/renderpark-classroom/classroom.obj", "reference/renderpark-classroom/objects.json", 0.028, 0.25),
         ("scenes/renderpark-office2/office2.obj", "reference/renderpark-office2/objects.json", 0.018, 0.25),

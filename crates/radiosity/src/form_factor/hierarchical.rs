@@ -956,7 +956,7 @@ impl Ctx<'_> {
                 }
                 let minor = power <= self.power_eps;
                 let (v, partial) = self.visibility(r, s, minor, near, !terminal && !minor, &mut rng, c);
-                if terminal || !(partial && power > self.power_eps) {
+                if terminal || !(partial && !minor) {
                     if v > 0.0 {
                         let dir = if ns.surface { Link::MEAN } else { self.reading(r, s, near) };
                         links.push(Link { r, s, f: (f * v) as f32, g: (g * v).as_vec3().to_array(), dir, near });

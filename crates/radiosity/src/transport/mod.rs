@@ -70,8 +70,9 @@ pub const AUTO_ELEMENTS: u64 = 50_000;
 /// over seeds 0–4) 1.98 % / 4.08 % against 1.86 % / 4.28 %, 2.1 s against 3.1 s; with 64
 /// closure rays per element ("Eleventh round") office2's median over seeds 0–7 is 1.63 %
 /// against 1.71 % for rows, the classroom's 2.29 %. A box of a few large walls cut into
-/// many elements keeps rows, which are exact per element there: the Cornell box (20 polygons, 5 144 elements)
-/// is 1.99 % hierarchical against 1.63 % with rows (issue 5 asks ≤ 2 %).
+/// many elements keeps rows, which are exact per element there: the Cornell box (20
+/// polygons, 5 144 elements) is 1.99 % hierarchical against 1.63 % with rows (issue 5
+/// asks ≤ 2 %).
 pub const AUTO_PATCHES: u64 = 256;
 
 impl Kind {
