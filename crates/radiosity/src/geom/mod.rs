@@ -98,6 +98,44 @@ where
     }
 }
 
+/// Splits a convex 2-D polygon by the signed distance `d` of its points: the part where
+/// `d ≤ 0` is appended to `outside`, the part where `d ≥ 0` to `inside`, each as
+/// [`clip_append`] would append it with `−d` and `d` (the same points, bit for bit: the
+/// crossing `t = d₀ / (d₀ − d₁)` is unchanged by negating both). Returns how many points
+/// each got (0 for a part under 3 points, which is not appended).
+fn split_append(poly: &[DVec2], d: impl Fn(DVec2) -> f64, outside: &mut Vec<DVec2>, inside: &mut Vec<DVec2>) -> (usize, usize) {
+    let (so, si) = (outside.len(), inside.len());
+    let Some(&last) = poly.last() else { return (0, 0) };
+    let (mut prev, mut dprev) = (last, d(last));
+    for &cur in poly {
+        let dcur = d(cur);
+        if (dprev > 0.0 && dcur < 0.0) || (dprev < 0.0 && dcur > 0.0) {
+            let t = dprev / (dprev - dcur);
+            let x = prev + (cur - prev) * t;
+            outside.push(x);
+            inside.push(x);
+        }
+        if dcur <= 0.0 {
+            outside.push(cur);
+        }
+        if dcur >= 0.0 {
+            inside.push(cur);
+        }
+        prev = cur;
+        dprev = dcur;
+    }
+    let keep = |v: &mut Vec<DVec2>, start: usize| {
+        let n = v.len() - start;
+        if n < 3 {
+            v.truncate(start);
+            0
+        } else {
+            n
+        }
+    };
+    (keep(outside, so), keep(inside, si))
+}
+
 #[inline]
 fn snap(d: f64, eps: f64) -> f64 {
     if d.abs() <= eps {
@@ -191,21 +229,24 @@ impl PieceSet {
             cur.extend_from_slice(p);
             for e in 0..m {
                 let (a, b) = (cutter[e], cutter[(e + 1) % m]);
-                if (b - a).length_squared() == 0.0 {
+                let ed = b - a;
+                if ed.length_squared() == 0.0 {
                     continue;
                 }
-                // The part outside this edge (right of a→b) is outside the cutter: keep it.
+                let len = ed.length();
+                // The part outside this edge (right of a→b) is outside the cutter: kept.
+                // The inside part goes on to the next edge. Both from one pass over the
+                // piece (the same points as clipping it twice, once to each side).
                 let s = out.pts.len();
-                if clip_line_2d(cur, a, b, -1.0, eps, &mut out.pts) > 0 {
+                next.clear();
+                let (n_out, n_in) = split_append(cur, |q| snap(ed.perp_dot(q - a) / len, eps), &mut out.pts, next);
+                if n_out > 0 {
                     if 0.5 * area2_2d(&out.pts[s..]).abs() > min_area {
                         out.ranges.push((s as u32, out.pts.len() as u32));
                     } else {
                         out.pts.truncate(s);
                     }
                 }
-                // The inside part goes on to the next edge.
-                next.clear();
-                let n_in = clip_line_2d(cur, a, b, 1.0, eps, next);
                 std::mem::swap(cur, next);
                 if n_in == 0 {
                     break;
