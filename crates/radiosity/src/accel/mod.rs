@@ -14,8 +14,10 @@
 //! and starts/ends a relative epsilon away from them. See [`SceneRays`].
 
 mod bvh;
+mod prefetch;
 mod scene_rays;
 pub mod workload;
 
 pub use bvh::{Bvh, BvhStats, Hit, Ray};
+pub(crate) use prefetch::prefetch;
 pub use scene_rays::{SceneRays, SEGMENT_EPS};
