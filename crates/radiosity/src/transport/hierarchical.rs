@@ -1320,7 +1320,7 @@ impl Hierarchy {
         use crate::accel::prefetch;
         let s = self.link_src[t] as usize;
         prefetch(&src.mean[s]);
-        if t >= (self.link_start[k + 1] - self.cluster_count[k]) as usize {
+        if t >= self.first_cluster_link(k) {
             // A cluster source: read by direction (`Link::MEAN` links are surface sources).
             prefetch(&self.tree.nodes[s].area_x);
             prefetch(&src.hi[s]);
@@ -1354,10 +1354,17 @@ impl Hierarchy {
         }
     }
 
+    /// The first of receiver `k`'s links whose source is a cluster (they come last in its
+    /// list, see [`Hierarchy::from_parts`]).
+    #[inline]
+    fn first_cluster_link(&self, k: usize) -> usize {
+        (self.link_start[k + 1] - self.cluster_count[k]) as usize
+    }
+
     /// How link `t` of receiver `k` reads its source ([`Link::MEAN`] for a surface source).
     #[inline]
     fn read_of(&self, k: usize, t: usize) -> [f32; 4] {
-        let first = (self.link_start[k + 1] - self.cluster_count[k]) as usize;
+        let first = self.first_cluster_link(k);
         if t < first {
             Link::MEAN
         } else {
