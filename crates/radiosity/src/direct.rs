@@ -171,17 +171,81 @@ pub fn direct_irradiance<'s>(
 /// Emitters above which [`direct_irradiance_sampled`] replaces the per-emitter loop.
 pub const LOOP_EMITTERS: usize = 4;
 
+/// The lamp choice of [`direct_irradiance_sampled`]: each emitter's weight `F·E` (`F` exact
+/// within [`NEAR_RADII`] of the emitter, [`guide`] beyond), cumulated, built at one point
+/// `x₀` and reused for later points `x` of the same polygon near it. Only the weights'
+/// positivity matters for an unbiased estimate (each ray divides by its pick's
+/// probability): a weight must be nonzero wherever `F(dA_x → Q)` is. `x` and `x₀` share the
+/// tangent plane (same polygon, same normal), so they share the horizon; and no emitter's
+/// plane passes between them ([`EmitterChoice::reach`]), so they are in front of the same
+/// emitters. The positions of one pixel take the table once instead of one loop over every
+/// emitter each (24 lamps on the classroom). [`EmitterChoice::reset`] forgets it (a new
+/// pixel).
+#[derive(Clone, Debug, Default)]
+pub struct EmitterChoice {
+    built: bool,
+    own: u32,
+    at: DVec3,
+    n: DVec3,
+    /// Distance from `at` below which the table may be reused: no emitter's plane is
+    /// nearer, and at most a quarter of the nearest emitter's distance (the weights stay a
+    /// good guide).
+    reach: f64,
+    /// Cumulative weights, one per emitter.
+    cum: Vec<f64>,
+    /// Exact factors of the emitters picked at the current point.
+    picked: Vec<(u32, f64)>,
+}
+
+impl EmitterChoice {
+    /// Forgets the table: the next point builds its own.
+    pub fn reset(&mut self) {
+        self.built = false;
+    }
+
+    /// Builds the table at `x` (normal `n`, on polygon `own`).
+    fn build(&mut self, scene: &Scene, emitters: &[Emitter], x: DVec3, n: DVec3, own: u32) {
+        self.cum.clear();
+        let mut total = 0.0;
+        let mut reach = f64::INFINITY;
+        for em in emitters {
+            let d = em.centroid - x;
+            // Near an emitter the guide is poor: take the exact factor there (then an
+            // unoccluded position gets nearly the exact sum, whatever the rays pick).
+            let g = if em.polygon == own {
+                0.0
+            } else if d.length_squared() < (NEAR_RADII * em.radius).powi(2) {
+                let q = &scene.polygons[em.polygon as usize];
+                point_to_polygon(x, n, &q.vertices, q.normal)
+            } else {
+                guide(em, x, n)
+            };
+            reach = reach.min(em.normal.dot(d).abs()).min(0.25 * d.length());
+            total += g * crate::luminance(em.exitance).max(1e-300);
+            self.cum.push(total);
+        }
+        *self = EmitterChoice { built: true, own, at: x, n, reach, cum: std::mem::take(&mut self.cum), picked: std::mem::take(&mut self.picked) };
+    }
+
+    /// Whether the table built at `at` serves `x` (see the type's docs).
+    fn serves(&self, x: DVec3, n: DVec3, own: u32) -> bool {
+        self.built && self.own == own && self.n == n && (x - self.at).length_squared() < self.reach * self.reach
+    }
+}
+
 /// Direct irradiance at `x` from many emitters. Shadow rays (one per point of `samples`)
 /// pick emitters in proportion to their unoccluded contribution `F·E`, with `F` exact
 /// within [`NEAR_RADII`] of an emitter and a cheap guide beyond (`guide`: a point-to-point
-/// factor, no contour integral). The first coordinate, stratified, selects the emitter
-/// through the cumulative weights and is re-used inside it. The exact `F(dA_x → Q)` of a
-/// far emitter is computed only once a ray picks it, and each ray weighs `F·E·V` by the
-/// probability of its pick: the estimate is unbiased wherever the weight is nonzero, which
-/// is wherever `F` is, and exact for an unoccluded position near its emitters (the furnace).
-/// With many emitters a position takes a few contour integrals instead of one per emitter:
-/// on the classroom's 24 lamp faces the 512² final gather went from 13.9 to 5.9 s, the
-/// image unchanged within noise (BENCHMARKS.md, "Eighth round"). `buf` is scratch space.
+/// factor, no contour integral), the weights taken at a point of the same polygon nearby
+/// ([`EmitterChoice`], built here when `choice` holds none that serves `x`). The first
+/// coordinate, stratified, selects the emitter through the cumulative weights and is re-used
+/// inside it. The exact `F(dA_x → Q)` of an emitter is computed only once a ray picks it,
+/// and each ray weighs `F·E·V` by the probability of its pick: the estimate is unbiased
+/// wherever the weight is nonzero, which is wherever `F` is, and exact for an unoccluded
+/// position near its emitters where the table was built (the furnace). With many emitters a
+/// position takes a few contour integrals instead of one per emitter: on the classroom's 24
+/// lamp faces the 512² final gather went from 13.9 to 5.9 s, the image unchanged within
+/// noise (BENCHMARKS.md, "Eighth round").
 #[allow(clippy::too_many_arguments)]
 pub fn direct_irradiance_sampled(
     scene: &Scene,
@@ -191,46 +255,39 @@ pub fn direct_irradiance_sampled(
     n: DVec3,
     own: u32,
     samples: &[(f64, f64)],
-    buf: &mut Vec<(f64, f64)>,
+    choice: &mut EmitterChoice,
 ) -> (Rgb, u64) {
-    buf.clear();
-    let mut total = 0.0;
-    for em in emitters {
-        // Near an emitter the guide is poor: take the exact factor there (then an
-        // unoccluded position gets the exact sum, whatever the rays pick). Far ones get the
-        // guide; their exact factor is filled in once a ray picks them.
-        let (f, g) = if em.polygon == own {
-            (0.0, 0.0)
-        } else if (em.centroid - x).length_squared() < (NEAR_RADII * em.radius).powi(2) {
-            let q = &scene.polygons[em.polygon as usize];
-            let f = point_to_polygon(x, n, &q.vertices, q.normal);
-            (f, f)
-        } else {
-            (f64::NAN, guide(em, x, n))
-        };
-        total += g * crate::luminance(em.exitance).max(1e-300);
-        buf.push((f, total));
+    if !choice.serves(x, n, own) {
+        choice.build(scene, emitters, x, n, own);
     }
+    let cum = &choice.cum;
+    let total = cum.last().copied().unwrap_or(0.0);
     if total <= 0.0 || samples.is_empty() {
         return (Rgb::ZERO, 0);
     }
+    let picked = &mut choice.picked;
+    picked.clear();
     let mut h = Rgb::ZERO;
     let mut nrays = 0;
     for &(a, b) in samples {
         let t = a * total;
-        let k = buf.partition_point(|e| e.1 <= t).min(buf.len() - 1);
-        let hi = buf[k].1;
-        let lo = if k == 0 { 0.0 } else { buf[k - 1].1 };
+        let k = cum.partition_point(|&c| c <= t).min(cum.len() - 1);
+        let hi = cum[k];
+        let lo = if k == 0 { 0.0 } else { cum[k - 1] };
         let w = hi - lo;
         if w <= 0.0 {
             continue;
         }
         let em = &emitters[k];
         let q = &scene.polygons[em.polygon as usize];
-        if buf[k].0.is_nan() {
-            buf[k].0 = point_to_polygon(x, n, &q.vertices, q.normal);
-        }
-        let f = buf[k].0;
+        let f = match picked.iter().find(|p| p.0 == k as u32) {
+            Some(p) => p.1,
+            None => {
+                let f = point_to_polygon(x, n, &q.vertices, q.normal);
+                picked.push((k as u32, f));
+                f
+            }
+        };
         if f <= 0.0 {
             continue;
         }
@@ -298,11 +355,12 @@ mod tests {
             stratified(32, &mut rng, &mut fine);
             let (exact, _) = direct_irradiance(&scene, &rays, &ems, x, up, own, |_| &fine);
             let (mut sum, mut sum2, runs) = (Rgb::ZERO, 0.0, 200_000);
-            let (mut pts, mut buf) = (Vec::new(), Vec::new());
+            let (mut pts, mut choice) = (Vec::new(), EmitterChoice::default());
             for run in 0..runs {
                 let mut rng = rng_for(11, run);
                 stratified(2, &mut rng, &mut pts);
-                let (h, _) = direct_irradiance_sampled(&scene, &rays, &ems, x, up, own, &pts, &mut buf);
+                choice.reset();
+                let (h, _) = direct_irradiance_sampled(&scene, &rays, &ems, x, up, own, &pts, &mut choice);
                 sum += h;
                 sum2 += crate::luminance(h).powi(2);
             }
@@ -316,5 +374,73 @@ mod tests {
             // Colour too: the dim lamp's blue share comes through.
             assert!(((mean.z - exact.z) / exact.z).abs() < 0.02, "{x}: blue {} against {}", mean.z, exact.z);
         }
+    }
+
+    /// Weights built at one point serve its neighbours on the same polygon unbiasedly:
+    /// built at x₀ (5 cm away, same floor or blocker top) and reused at x, the mean over many
+    /// draws still matches the per-emitter loop at x; and no emitter's plane lies within the
+    /// reuse distance of x₀.
+    #[test]
+    fn lamp_choice_reused_nearby_stays_unbiased() {
+        let scene = room();
+        let rays = SceneRays::new(&scene.polygons);
+        let ems = emitters(&scene);
+        let up = DVec3::Y;
+        for (x, own) in [(DVec3::new(1.4, 0.0, 1.5), 0), (DVec3::new(2.5, 0.0, 2.2), 0), (DVec3::new(1.9, 0.5, 1.9), 1)] {
+            let x0 = x + DVec3::new(0.03, 0.0, -0.04);
+            let mut rng = rng_for(7, 0);
+            let mut fine = Vec::new();
+            stratified(32, &mut rng, &mut fine);
+            let (exact, _) = direct_irradiance(&scene, &rays, &ems, x, up, own, |_| &fine);
+            let (mut sum, mut sum2, runs) = (0.0, 0.0, 200_000);
+            let (mut pts, mut choice) = (Vec::new(), EmitterChoice::default());
+            let mut reused = 0;
+            for run in 0..runs {
+                let mut rng = rng_for(13, run);
+                stratified(2, &mut rng, &mut pts);
+                choice.reset();
+                direct_irradiance_sampled(&scene, &rays, &ems, x0, up, own, &pts, &mut choice);
+                for em in &ems {
+                    assert!(choice.reach <= em.normal.dot(em.centroid - x0).abs() + 1e-12);
+                }
+                reused += usize::from(choice.serves(x, up, own));
+                let (h, _) = direct_irradiance_sampled(&scene, &rays, &ems, x, up, own, &pts, &mut choice);
+                let l = crate::luminance(h);
+                sum += l;
+                sum2 += l * l;
+            }
+            assert_eq!(reused, runs as usize, "{x}: the table built 5 cm away was not reused");
+            let (m, e) = (sum / runs as f64, crate::luminance(exact));
+            let stderr = ((sum2 / runs as f64 - m * m).max(0.0) / runs as f64).sqrt();
+            eprintln!("{x}: reused {m:.5} ± {stderr:.5}, loop {e:.5}");
+            assert!((m - e).abs() < 4.0 * stderr + 1e-3 * e, "{x}: reused {m} ± {stderr}, loop {e}");
+            assert!((m - e).abs() < 0.01 * e, "{x}: reused {m}, loop {e}");
+        }
+    }
+
+    /// A table built above a lamp's plane (where the lamp, facing down, gives nothing) does
+    /// not serve a point of the same wall below it (where it does): the wall point below
+    /// builds its own and gets the lamp's light.
+    #[test]
+    fn lamp_choice_is_not_reused_across_a_lamps_plane() {
+        let obj = "usemtl wall\nv 0 0 0\nv 0 0 2\nv 0 3 2\nv 0 3 0\nf 1 4 3 2\nusemtl lamp\nv 0.1 1 0.9\nv 0.3 1 0.9\nv 0.3 1 1.1\nv 0.1 1 1.1\nf 5 6 7 8\n";
+        let mtl = "newmtl wall\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 3 3 3\n";
+        let desc = obj::parse_obj(&format!("mtllib m.mtl\n{obj}"), Path::new("wall.obj"), |_, _| obj::parse_mtl(mtl, Path::new("m.mtl"))).unwrap();
+        let scene = Scene::from_desc(desc).unwrap();
+        let rays = SceneRays::new(&scene.polygons);
+        let ems = emitters(&scene);
+        assert_eq!(ems.len(), 1);
+        assert!(ems[0].normal.y < -0.99, "the lamp faces down");
+        let n = scene.polygons[0].normal;
+        let (above, below) = (DVec3::new(0.0, 1.05, 1.0), DVec3::new(0.0, 0.95, 1.0));
+        let mut pts = Vec::new();
+        stratified(2, &mut rng_for(3, 0), &mut pts);
+        let mut choice = EmitterChoice::default();
+        let (h_above, _) = direct_irradiance_sampled(&scene, &rays, &ems, above, n, 0, &pts, &mut choice);
+        assert_eq!(crate::luminance(h_above), 0.0);
+        assert!(!choice.serves(below, n, 0));
+        let (h_below, _) = direct_irradiance_sampled(&scene, &rays, &ems, below, n, 0, &pts, &mut choice);
+        let f = point_to_polygon(below, n, &scene.polygons[1].vertices, scene.polygons[1].normal);
+        assert!(f > 0.0 && crate::luminance(h_below) > 0.0, "below the lamp: {h_below} (F = {f})");
     }
 }

@@ -172,7 +172,8 @@ pub struct Patterns {
     shadows: Vec<Vec<(f64, f64)>>,
     gather: Vec<(f64, f64)>,
     sun: Vec<(f64, f64)>,
-    scratch: Vec<(f64, f64)>,
+    /// The lamp choice, shared by the positions of one pixel (or texel) on one polygon.
+    choice: crate::direct::EmitterChoice,
     cells: Vec<u32>,
 }
 
@@ -205,6 +206,7 @@ impl<'a> Shader<'a> {
     pub fn draw(&self, side: usize, positions: usize, rng: &mut crate::sampling::Rng, pat: &mut Patterns) {
         use rand::RngExt;
         let base: u64 = rng.random();
+        pat.choice.reset();
         let npat = if self.ems.len() <= LOOP_EMITTERS { self.ems.len() } else { 1 };
         pat.shadows.resize_with(npat, Vec::new);
         for (t, p) in pat.shadows.iter_mut().enumerate() {
@@ -257,7 +259,7 @@ impl<'a> Shader<'a> {
             direct_irradiance(scene, rays, &self.ems, p, el.normal, el.patch, |em| &shadows[em][k * m2..(k + 1) * m2])
         } else {
             let pts = &pat.shadows[0][k * m2..(k + 1) * m2];
-            direct_irradiance_sampled(scene, rays, &self.ems, p, el.normal, el.patch, pts, &mut pat.scratch)
+            direct_irradiance_sampled(scene, rays, &self.ems, p, el.normal, el.patch, pts, &mut pat.choice)
         };
         nrays += r;
         if let Some(sun) = &self.sun {
