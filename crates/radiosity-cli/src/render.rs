@@ -300,7 +300,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     // A camera that sees surfaces, but none of them lit (outside a closed two-sided room),
     // draws a black image too: known only now. The default camera then tries the inside.
     if solved.scene.lit_sky().is_none() {
-        let b = solved.solution.display_radiosity();
+        let b = solved.lit_radiosity();
         let lit = |cam: &Camera| lit_coverage(&solved.mesh, &tracer, &b, cam, a.width, a.height, 64);
         for (k, (name, cam, _, _)) in views.iter_mut().enumerate() {
             let (seen, total) = lit(cam);

@@ -464,6 +464,21 @@ fn default_camera_outside_a_two_sided_room_moves_inside_and_an_explicit_one_is_w
     assert!(!err.contains("using a camera inside"), "{err}");
 }
 
+/// `--max-iterations 0` leaves B = E (only the lamp lit), but the final gather still shows the
+/// lamp's direct light: the camera check judges lit surfaces by one bounce then, and neither
+/// warns of a black image nor moves the camera (2026-12-06 sweep: "sees lit surfaces in
+/// only 0.5 %" over an image 70 % lit).
+#[test]
+fn no_black_image_warning_when_solving_stops_before_the_first_bounce() {
+    let d = case_dir("max-iterations-0");
+    let (code, err, _) = run_in(&d, &["render", "cornell", "--max-iterations", "0", "--width", "16", "--height", "16", "--spp", "1", "-o", "x.png", "--exr", "x.exr"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(!err.contains("sees lit surfaces"), "{err}");
+    let img = radiosity::output::exr::read(&d.join("x.exr")).unwrap();
+    let lit = img.pixels.iter().filter(|p| p.x > 0.0).count();
+    assert!(lit * 2 > img.pixels.len(), "{lit} of {} pixels lit", img.pixels.len());
+}
+
 /// A box open towards +z (as the McGuire and glTF Cornell boxes are, where Cornell's own data
 /// opens towards −z), one-sided walls facing in, a lamp under its ceiling.
 fn box_open_towards_plus_z(d: &Path, name: &str, two_sided_toml: bool) -> PathBuf {

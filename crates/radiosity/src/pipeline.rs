@@ -804,6 +804,22 @@ impl Solved {
             .collect()
     }
 
+    /// The radiosity that tells lit surfaces from dark ones when a camera is checked: the
+    /// solution's, or — when the solver stopped before its first iteration (`B = E`:
+    /// `--max-iterations 0`) — one bounce of it, `E + ρ·F·E`, where the operator is at hand:
+    /// the final gather shows the emitters' direct light whatever the solution holds.
+    pub fn lit_radiosity(&self) -> Vec<Rgb> {
+        let b = self.solution.display_radiosity();
+        let Some(f) = self.transport.as_ref().filter(|_| self.solution.stats.iterations == 0) else {
+            return b;
+        };
+        let (rho, _) = element_materials(&self.scene, &self.mesh);
+        let mut fb = vec![Rgb::ZERO; b.len()];
+        f.gather(&b, &mut fb);
+        f.release_buffers();
+        b.iter().zip(&rho).zip(&fb).map(|((b, r), h)| *b + *r * *h).collect()
+    }
+
     /// Indirect irradiance per element — light that has bounced at least once — and its
     /// per-vertex reconstruction (for the final gather). With form factors it is
     /// `(F·(B − E))_i`; without (stochastic solvers) it is `(B − E)/ρ` minus the direct
