@@ -26,7 +26,8 @@ pub struct BakeArgs {
     #[arg(short, long, value_name = "FILE.glb")]
     pub output: PathBuf,
     /// Radiance is multiplied by this before it is written [default: automatic, 0.8 over
-    /// the 97th percentile of the surfaces' radiance, as `render` picks for images].
+    /// the 97th percentile (by area) of the surfaces' radiance in its brightest channel, so
+    /// that saturated colours keep their shading].
     #[arg(long, value_name = "K")]
     pub exposure: Option<f64>,
     /// Also bake a lightmap: a second UV set (TEXCOORD_1) from an automatic atlas, texels

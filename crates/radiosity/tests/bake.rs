@@ -77,6 +77,28 @@ fn baked_furnace_vertex_colours_are_e_over_one_minus_rho() {
     assert_eq!(json["asset"]["extras"]["radiosity"]["exposure"], serde_json::json!(0.3));
 }
 
+/// A saturated surface keeps its shading: the automatic exposure puts the brightest
+/// channel, not the luminance, at 0.8, so no vertex channel is clipped (by luminance a red
+/// furnace's red channel went to 2.1 at every vertex; 2026-12-06 sweep, a red glTF box
+/// under a sky baked flat red).
+#[test]
+fn baked_red_furnace_keeps_every_channel_below_one() {
+    let mut desc = builtin::furnace(0.5, 1.0);
+    desc.materials[0].reflectance = radiosity::Rgb::new(0.8, 0.1, 0.1);
+    let scene = Scene::from_desc(desc).unwrap();
+    let s = Settings { mesh_size: Some(0.25), solver: radiosity::solve::Solver::Direct, ..Default::default() };
+    let solved = solve_scene(scene, &s, &NoProgress).unwrap();
+    // L = L_e/(1 − ρ) per channel: red 5, green and blue 1/0.9.
+    let k = auto_exposure(&solved.scene, &solved.mesh, &solved.solution.display_radiosity());
+    assert!((k * 5.0 - 0.8).abs() < 1e-6, "auto exposure {k}");
+    let (glb, stats) = bake(&solved, k);
+    assert_eq!(stats.clipped, 0);
+    let (json, bin) = chunks(&glb);
+    for v in colors(&json, &bin) {
+        assert!((f64::from(v[0]) - 0.8).abs() < 1e-5 && (f64::from(v[1]) - 0.8 / 4.5).abs() < 1e-5, "{v:?}");
+    }
+}
+
 #[test]
 fn baked_cornell_box_reads_back_as_the_same_scene_and_light() {
     let scene = Scene::from_desc(builtin::by_name("cornell").unwrap()).unwrap();

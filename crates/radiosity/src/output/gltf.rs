@@ -65,7 +65,7 @@ use json::validation::{Checked::Valid, USize64};
 
 use crate::mesh::Mesh;
 use crate::scene::{Camera, Scene};
-use crate::{luminance, Error, Result, Rgb};
+use crate::{Error, Result, Rgb};
 
 /// What to write.
 #[derive(Clone, Debug)]
@@ -79,15 +79,18 @@ pub struct Options {
 }
 
 /// The automatic exposure of a bake: 0.8 over the 97th percentile (by area) of the
-/// elements' radiance luminance, emitters left out unless every surface emits (as [`super::auto_exposure`] does for
-/// image pixels, so that a baked model and a rendered image of it look alike).
+/// elements' radiance in their brightest channel, emitters left out unless every surface
+/// emits. [`super::auto_exposure`] takes the luminance of image pixels; a vertex colour is
+/// clipped channel by channel, and by luminance a saturated surface (a red box, 0.21 of
+/// its red in luminance) had its red channel clipped at every vertex (flat, unshaded).
+/// For grey surfaces the two agree.
 pub fn auto_exposure(scene: &Scene, mesh: &Mesh, element_b: &[Rgb]) -> f64 {
     let radiance = |with_emitters: bool| -> Vec<(f64, f64)> {
         mesh.elements
             .iter()
             .zip(element_b)
             .filter(|(e, _)| with_emitters || !scene.materials[scene.polygons[e.patch as usize].material as usize].is_emitter())
-            .map(|(e, b)| (luminance(*b) / std::f64::consts::PI, e.area))
+            .map(|(e, b)| (b.max_element() / std::f64::consts::PI, e.area))
             .filter(|(l, _)| *l > 0.0 && l.is_finite())
             .collect()
     };
