@@ -126,7 +126,7 @@ pub struct SolveFlags {
     #[arg(long, value_name = "X,Y,Z,E", value_parser = parse_sun)]
     pub sun: Option<[f64; 4]>,
     /// Angular diameter of --sun's disk, degrees (0 to 20; 0 is a point).
-    #[arg(long, value_name = "DEG", default_value_t = radiosity::scene::toml_file::DEFAULT_SUN_DIAMETER_DEG)]
+    #[arg(long, value_name = "DEG", requires = "sun", default_value_t = radiosity::scene::toml_file::DEFAULT_SUN_DIAMETER_DEG)]
     pub sun_diameter: f64,
     #[command(flatten)]
     pub adaptive: AdaptiveFlags,
@@ -520,6 +520,8 @@ fn not_replaceable(path: &Path) -> Option<String> {
 #[derive(Default)]
 pub struct Outputs {
     files: Vec<(String, PathBuf)>,
+    /// Files whose format is fixed: index into `files`, extension, format name.
+    formats: Vec<(usize, &'static str, &'static str)>,
 }
 
 impl Outputs {
@@ -528,12 +530,19 @@ impl Outputs {
         self.files.push((flag.to_string(), path.to_path_buf()));
     }
 
+    /// Adds a file written in one format, `format` (e.g. "PNG"), whose name must end in
+    /// `.ext` (any case): an image named `.jpg` holding PNG data is refused, not written.
+    pub fn add_format(&mut self, flag: &str, path: &Path, ext: &'static str, format: &'static str) {
+        self.formats.push((self.files.len(), ext, format));
+        self.add(flag, path);
+    }
+
     /// Checks every output: a file name, distinct from the others, not an existing
     /// directory or special file, and in a folder that exists (or can be created) and is
     /// writable. Nothing is created but a probe file, removed at once.
     pub fn check(&self) -> Result<()> {
         let mut seen: Vec<(PathBuf, &str, &Path)> = Vec::new();
-        for (flag, path) in &self.files {
+        for (k, (flag, path)) in self.files.iter().enumerate() {
             check_output(flag, path)?;
             let key = normalized(path);
             if let Some((_, other, p)) = seen.iter().find(|(k, _, _)| *k == key) {
@@ -541,6 +550,11 @@ impl Outputs {
                     bail!("{flag}: two outputs are the same file {} (and {}): outputs must be distinct", path.display(), p.display());
                 }
                 bail!("{other} {} and {flag} {} are the same file: outputs must be distinct", p.display(), path.display());
+            }
+            if let Some(&(_, ext, format)) = self.formats.iter().find(|f| f.0 == k) {
+                if !path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case(ext)) {
+                    bail!("{flag} {}: this writes {format}; name the file .{ext}", path.display());
+                }
             }
             seen.push((key, flag, path));
         }
@@ -577,6 +591,13 @@ fn check_output(flag: &str, path: &Path) -> Result<()> {
             let _ = std::fs::remove_file(&probe);
         }
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        // A folder that exists but where the system makes no new files (/proc) reports "No
+        // such file": say so instead of only quoting it.
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
+            "{flag} {}: cannot write in folder {}: it exists but takes no new files ({e})",
+            path.display(),
+            existing.display()
+        ),
         Err(e) => bail!("{flag} {}: cannot write in folder {}: {e}", path.display(), existing.display()),
     }
     Ok(())

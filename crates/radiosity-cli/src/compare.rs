@@ -29,9 +29,12 @@ pub struct CompareArgs {
 }
 
 pub fn run(a: CompareArgs) -> Result<ExitCode> {
+    if a.light_threshold.is_nan() || a.light_threshold <= 0.0 {
+        anyhow::bail!("--light-threshold must be a positive number (inf masks nothing), not {}", a.light_threshold);
+    }
     if let Some(p) = &a.heatmap {
         let mut o = crate::common::Outputs::default();
-        o.add("--heatmap", p);
+        o.add_format("--heatmap", p, "png", "PNG");
         o.check()?;
     }
     let img = output::exr::read(&a.image)?;

@@ -92,7 +92,9 @@ pub struct RenderArgs {
     /// Also write an image after every solver iteration into this folder (frame-0001.png …
     /// and frames.json): light flowing into the scene bounce by bounce (progressive
     /// refinement: after 1, 2, 4 … shots, then every n shots). Frames are Gouraud previews
-    /// of the first view, all at the final image's exposure, so the sequence brightens.
+    /// of the first view, all at the final image's exposure: with jacobi the sequence
+    /// brightens bounce by bounce; progressive refinement shows its ambient estimate of the
+    /// light not yet shot, so its first frames are flat and bright and settle.
     #[arg(long, value_name = "DIR")]
     pub frames: Option<PathBuf>,
 }
@@ -153,6 +155,21 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     }
     if a.gather_rays.is_some_and(|g| g > 16) {
         bail!("--gather-rays must be between 0 and 16");
+    }
+    if !gather {
+        let mut set = Vec::new();
+        if a.shadow_rays != 2 {
+            set.push("--shadow-rays");
+        }
+        if a.gather_rays.is_some() {
+            set.push("--gather-rays");
+        }
+        if a.pixel_noise != radiosity::render::gather::DEFAULT_NOISE {
+            set.push("--pixel-noise");
+        }
+        if !set.is_empty() {
+            bail!("{} set the final gather, which --render {} does not use (use --render gather)", set.join(", "), a.mode);
+        }
     }
     if let Some(e) = a.exposure {
         if !(e.is_finite() && e > 0.0) {
@@ -459,9 +476,9 @@ fn outputs(a: &RenderArgs, png: &Path, list: bool, names: &[String]) -> Outputs 
         } else {
             (png.to_path_buf(), a.exr.clone())
         };
-        o.add(if a.output.is_some() { "-o" } else { "the image (default name)" }, &p);
+        o.add_format(if a.output.is_some() { "-o" } else { "the image (default name)" }, &p, "png", "PNG");
         if let Some(e) = e {
-            o.add("--exr", &e);
+            o.add_format("--exr", &e, "exr", "OpenEXR");
         }
     }
     if let Some(r) = &a.solve.report {

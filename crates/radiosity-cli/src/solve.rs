@@ -35,7 +35,7 @@ pub fn run(a: SolveArgs) -> Result<ExitCode> {
         outputs.add("--report", p);
     }
     if let Some(p) = &a.plot {
-        outputs.add("--plot", p);
+        outputs.add_format("--plot", p, "png", "PNG");
     }
     outputs.check()?;
     a.solve.init_threads()?;

@@ -136,6 +136,19 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
     if let Some(p) = &a.temperatures {
         let n = radiosity::thermal::surface_objects(&desc).len();
         let t = viewht::load_temperatures(p, n)?;
+        // A .vs3 file gives no boundary conditions of its own: the file must set them all.
+        let unset: Vec<usize> = (1..=n).filter(|&k| t[k - 1].is_none()).collect();
+        if vs3.is_some() && !unset.is_empty() {
+            let set: Vec<usize> = (1..=n).filter(|&k| t[k - 1].is_some()).collect();
+            bail!(
+                "{}: gives temperatures to surfaces {} of the {n} in {}, which has no other boundary conditions: \
+                 surfaces {} need one too (lines 'first last T', 1-based)",
+                p.display(),
+                if set.is_empty() { "none".to_string() } else { number_ranges(&set) },
+                path.display(),
+                number_ranges(&unset)
+            );
+        }
         radiosity::thermal::set_temperatures(&mut desc, &t)?;
     }
     let enclosure = a.enclosure || vs3.as_ref().is_some_and(|c| c.enclosure);
@@ -318,4 +331,19 @@ fn viewht(a: &ThermalArgs, path: &Path, t0: Instant) -> Result<ExitCode> {
         crate::common::write_atomic(p, serde_json::to_string_pretty(&v)?.as_bytes())?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Sorted 1-based numbers as ranges: `1, 6–101`.
+fn number_ranges(k: &[usize]) -> String {
+    let mut out: Vec<String> = Vec::new();
+    let mut i = 0;
+    while i < k.len() {
+        let mut j = i;
+        while j + 1 < k.len() && k[j + 1] == k[j] + 1 {
+            j += 1;
+        }
+        out.push(if j == i { k[i].to_string() } else { format!("{}–{}", k[i], k[j]) });
+        i = j + 1;
+    }
+    out.join(", ")
 }

@@ -715,3 +715,63 @@ fn two_sided_lamp_in_a_ceiling_is_hinted_and_the_toml_override_closes_the_room()
     assert!(escaped(&d).abs() < 1e-3, "escaped {}", escaped(&d));
     assert!(!err.contains("warning"), "{err}");
 }
+
+/// An output named for another format is refused before any work, not written in ours
+/// (2026-12-06 sweep: `-o a.jpg` wrote PNG data, `--exr a.txt` EXR data).
+#[test]
+fn output_named_for_another_format_is_refused() {
+    let d = case_dir("output-format");
+    for (args, named) in [
+        (&["render", "cornell", "-o", "a.jpg"][..], &["-o a.jpg", "PNG", ".png"][..]),
+        (&["render", "cornell", "-o", "a.png", "--exr", "a.txt"], &["--exr a.txt", "OpenEXR", ".exr"]),
+        (&["solve", "cornell", "--plot", "p.jpg"], &["--plot p.jpg", "PNG"]),
+    ] {
+        let (code, err, _) = run_in(&d, args);
+        refused(code, &err, named);
+        assert!(files_in(&d).is_empty(), "{:?}", files_in(&d));
+    }
+    // Any case of the right extension is taken.
+    let (code, err, _) = run_in(&d, &["render", "cornell", "--width", "8", "--height", "8", "--spp", "1", "-o", "A.PNG", "-q"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(files_in(&d), ["A.PNG"]);
+}
+
+/// Flags of a part that the run does not use are not silently ignored (2026-12-06 sweep):
+/// link settings with `--transport rows` and final-gather settings with `--render flat` are
+/// refused; link settings when auto picks rows are warned about; `--sun-diameter` needs
+/// `--sun`.
+#[test]
+fn flags_for_a_part_the_run_does_not_use_are_answered() {
+    let d = case_dir("unused-flags");
+    let (code, err, _) = run_in(&d, &["solve", "cornell", "--transport", "rows", "--link-separation", "0.3"]);
+    refused(code, &err, &["--link-separation", "--transport rows"]);
+    let (code, err, _) = run_in(&d, &["render", "cornell", "--render", "flat", "--gather-rays", "3", "--shadow-rays", "3"]);
+    refused(code, &err, &["--shadow-rays, --gather-rays", "--render flat"]);
+    let (code, err, _) = run_in(&d, &["solve", "cornell", "--emitters-in-links", "--max-iterations", "1"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("warning: --emitters-in-links set the hierarchical transport's links, which this run does not use: auto picked form-factor rows"), "{err}");
+    let (code, err, _) = run_in(&d, &["render", "cornell", "--sun-diameter", "2", "-o", "x.png"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("--sun <X,Y,Z,E>"), "{err}");
+    assert!(files_in(&d).is_empty(), "{:?}", files_in(&d));
+}
+
+/// `compare --light-threshold nan` masked nothing and said so nowhere: refused.
+#[test]
+fn compare_light_threshold_nan_is_refused() {
+    let d = case_dir("compare-nan");
+    let (code, err, _) = run_in(&d, &["compare", "a.exr", "b.exr", "--light-threshold", "nan"]);
+    refused(code, &err, &["--light-threshold", "positive"]);
+}
+
+/// A ViewHT temperature file that leaves surfaces of a .vs3 scene (which has no boundary
+/// conditions of its own) without a temperature names the file and the surfaces, in
+/// ranges, instead of listing a hundred material names.
+#[test]
+fn vs3_temperatures_that_leave_surfaces_unset_name_them() {
+    let d = case_dir("vs3-temperatures");
+    std::fs::write(d.join("t.txt"), "5 2 300\n0 0\n").unwrap();
+    let vs3 = Path::new(env!("CARGO_MANIFEST_DIR")).join("../radiosity/tests/data/box345.vs3");
+    let (code, err, _) = run_in(&d, &["thermal", vs3.to_str().unwrap(), "--temperatures", "t.txt"]);
+    refused(code, &err, &["t.txt", "surfaces 2–5 of the 106", "surfaces 1, 6–106 need one too"]);
+}

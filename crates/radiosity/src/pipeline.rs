@@ -189,6 +189,20 @@ fn prepare(
             transport::AUTO_ELEMENTS
         ));
     }
+    // Link settings mean nothing to form-factor rows: refused when rows were asked for,
+    // warned about when the automatic choice made them moot.
+    let moot = settings.links.changed_flags();
+    if kind == transport::Kind::Rows && !moot.is_empty() {
+        let what = format!("{} set the hierarchical transport's links", moot.join(", "));
+        if settings.transport == transport::Kind::Rows {
+            return Err(Error::Invalid(format!("{what}; --transport rows computes form-factor rows (drop them, or use --transport hierarchical)")));
+        }
+        progress.warning(&format!(
+            "{what}, which this run does not use: auto picked form-factor rows ({patches} polygons, {count} elements; hierarchical from {} polygons or above {} elements, for jacobi and the stochastic solvers with point-sampled form factors, without --adaptive); --transport hierarchical uses them",
+            transport::AUTO_PATCHES,
+            transport::AUTO_ELEMENTS
+        ));
+    }
     let cap = if kind == transport::Kind::Hierarchical { settings.max_elements_hierarchical } else { settings.max_elements };
     if count > cap {
         return Err(Error::Invalid(element_cap_advice(&scene, size, count, cap)));

@@ -206,6 +206,35 @@ impl Default for Options {
 }
 
 impl Options {
+    /// The command-line flags of the settings that differ from the defaults (for the
+    /// message that says they do not apply to form-factor rows).
+    pub fn changed_flags(&self) -> Vec<&'static str> {
+        let d = Options::default();
+        let mut out = Vec::new();
+        if self.separation != d.separation {
+            out.push("--link-separation");
+        }
+        if self.tolerance != d.tolerance {
+            out.push("--link-tolerance");
+        }
+        if self.visibility_rays != d.visibility_rays {
+            out.push("--link-rays");
+        }
+        if self.cluster_receivers != d.cluster_receivers {
+            out.push("--no-cluster-receivers");
+        }
+        if self.min_size != d.min_size {
+            out.push("--link-min-size");
+        }
+        if self.direct_columns != d.direct_columns {
+            out.push("--emitters-in-links");
+        }
+        if self.closure_rays != d.closure_rays {
+            out.push("--link-closure-rays");
+        }
+        out
+    }
+
     /// Checks the values.
     pub fn validate(&self) -> Result<()> {
         if !(self.separation > 0.0 && self.separation <= 4.0) {
