@@ -210,29 +210,18 @@ impl Options {
     /// message that says they do not apply to form-factor rows).
     pub fn changed_flags(&self) -> Vec<&'static str> {
         let d = Options::default();
-        let mut out = Vec::new();
-        if self.separation != d.separation {
-            out.push("--link-separation");
-        }
-        if self.tolerance != d.tolerance {
-            out.push("--link-tolerance");
-        }
-        if self.visibility_rays != d.visibility_rays {
-            out.push("--link-rays");
-        }
-        if self.cluster_receivers != d.cluster_receivers {
-            out.push("--no-cluster-receivers");
-        }
-        if self.min_size != d.min_size {
-            out.push("--link-min-size");
-        }
-        if self.direct_columns != d.direct_columns {
-            out.push("--emitters-in-links");
-        }
-        if self.closure_rays != d.closure_rays {
-            out.push("--link-closure-rays");
-        }
-        out
+        [
+            (self.separation != d.separation, "--link-separation"),
+            (self.tolerance != d.tolerance, "--link-tolerance"),
+            (self.visibility_rays != d.visibility_rays, "--link-rays"),
+            (self.cluster_receivers != d.cluster_receivers, "--no-cluster-receivers"),
+            (self.min_size != d.min_size, "--link-min-size"),
+            (self.direct_columns != d.direct_columns, "--emitters-in-links"),
+            (self.closure_rays != d.closure_rays, "--link-closure-rays"),
+        ]
+        .into_iter()
+        .filter_map(|(changed, flag)| changed.then_some(flag))
+        .collect()
     }
 
     /// Checks the values.
