@@ -23,6 +23,9 @@ use radiosity::{NoProgress, Progress as _};
 use crate::common::{energy_summary, exit_code, write_atomic, Outputs, SolveFlags};
 use crate::progress::CliProgress;
 
+/// The default of `--shadow-rays` (also how the gather-only flags are told to be unset).
+const DEFAULT_SHADOW_RAYS: usize = 2;
+
 /// Flags of `radiosity render`.
 #[derive(Args, Debug)]
 pub struct RenderArgs {
@@ -69,7 +72,7 @@ pub struct RenderArgs {
     #[arg(long = "render", value_name = "MODE", default_value = "gather")]
     pub mode: String,
     /// Final gather: shadow rays per pixel sample and emitter, as N × N.
-    #[arg(long, value_name = "N", default_value_t = 2)]
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_SHADOW_RAYS)]
     pub shadow_rays: usize,
     /// Final gather: indirect rays per pixel sample, as N × N, each reading the reflected
     /// radiosity of the element it meets; 0 interpolates the indirect light from the mesh's
@@ -158,7 +161,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     }
     if !gather {
         let mut set = Vec::new();
-        if a.shadow_rays != 2 {
+        if a.shadow_rays != DEFAULT_SHADOW_RAYS {
             set.push("--shadow-rays");
         }
         if a.gather_rays.is_some() {

@@ -137,9 +137,8 @@ pub fn run(a: ThermalArgs) -> Result<ExitCode> {
         let n = radiosity::thermal::surface_objects(&desc).len();
         let t = viewht::load_temperatures(p, n)?;
         // A .vs3 file gives no boundary conditions of its own: the file must set them all.
-        let unset: Vec<usize> = (1..=n).filter(|&k| t[k - 1].is_none()).collect();
+        let (set, unset): (Vec<usize>, Vec<usize>) = (1..=n).partition(|&k| t[k - 1].is_some());
         if vs3.is_some() && !unset.is_empty() {
-            let set: Vec<usize> = (1..=n).filter(|&k| t[k - 1].is_some()).collect();
             bail!(
                 "{}: gives temperatures to surfaces {} of the {n} in {}, which has no other boundary conditions: \
                  surfaces {} need one too (lines 'first last T', 1-based)",

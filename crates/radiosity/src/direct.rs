@@ -224,7 +224,7 @@ impl EmitterChoice {
             total += g * crate::luminance(em.exitance).max(1e-300);
             self.cum.push(total);
         }
-        *self = EmitterChoice { built: true, own, at: x, n, reach, cum: std::mem::take(&mut self.cum), picked: std::mem::take(&mut self.picked) };
+        (self.built, self.own, self.at, self.n, self.reach) = (true, own, x, n, reach);
     }
 
     /// Whether the table built at `at` serves `x` (see the type's docs).
