@@ -1328,15 +1328,6 @@ impl Ctx<'_> {
             }
             (cx * cy / (std::f64::consts::PI * r2 + disk), du)
         };
-        // Unoccluded: at every point of `r`, against `s` opened near the point.
-        let (mut unoccluded, mut dir, mut count) = (0.0, DVec3::ZERO, 0usize);
-        for t in 0..sc.pairs.len() {
-            let (x, nx, _) = sc.pairs[t].0;
-            let (f, d) = self.unoccluded_at(x, nx, s, near, &mut sc.frontier);
-            unoccluded += f;
-            dir += d;
-            count += 1;
-        }
         // Visible fraction of the paired points, weighted by their kernel.
         let (mut seen, mut weight) = (0.0, 0.0);
         for &(x, y) in &sc.pairs {
@@ -1350,6 +1341,20 @@ impl Ctx<'_> {
             }
         }
         let v = if weight > 0.0 { seen / weight } else { 0.0 };
+        if v <= 0.0 {
+            // Hidden (half of Sponza's terminal pairs): the factor is 0 whatever the
+            // unoccluded one, which costs more than the rays.
+            return (0.0, DVec3::ZERO);
+        }
+        // Unoccluded: at every point of `r`, against `s` opened near the point.
+        let (mut unoccluded, mut dir, mut count) = (0.0, DVec3::ZERO, 0usize);
+        for t in 0..sc.pairs.len() {
+            let (x, nx, _) = sc.pairs[t].0;
+            let (f, d) = self.unoccluded_at(x, nx, s, near, &mut sc.frontier);
+            unoccluded += f;
+            dir += d;
+            count += 1;
+        }
         ((unoccluded / count.max(1) as f64 * v).min(1.0), dir.normalize_or_zero())
     }
 
