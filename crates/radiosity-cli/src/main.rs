@@ -17,7 +17,7 @@ mod viewfactors;
 
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 /// Radiosity: diffuse global illumination by the finite-element method.
 #[derive(Parser)]
@@ -49,7 +49,10 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(e),
+    };
     progress::install_ctrlc();
     let result = match cli.command {
         Command::Render(a) => render::run(a),
@@ -72,4 +75,35 @@ fn main() -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// Clap's own answer to bad arguments, except for a flag that another subcommand takes:
+/// clap would point to the nearest spelling among this subcommand's flags (`solve --frames`:
+/// "a similar argument exists: '--rays'"); the user meant the other subcommand's flag.
+fn usage_error(e: clap::Error) -> ExitCode {
+    use clap::error::{ContextKind, ContextValue, ErrorKind};
+    if e.kind() == ErrorKind::UnknownArgument {
+        if let (Some(ContextValue::String(arg)), Some(current)) = (e.get(ContextKind::InvalidArg), std::env::args().nth(1)) {
+            let flag = arg.split('=').next().unwrap_or(arg);
+            let cmd = Cli::command();
+            let takes = |s: &clap::Command| {
+                s.get_arguments().any(|a| {
+                    a.get_long().is_some_and(|l| flag == format!("--{l}")) || a.get_short().is_some_and(|c| flag == format!("-{c}"))
+                })
+            };
+            let mine = cmd.find_subcommand(&current);
+            let owners: Vec<&str> =
+                cmd.get_subcommands().filter(|s| s.get_name() != current && takes(s)).map(|s| s.get_name()).collect();
+            if let (Some(_), false) = (mine, owners.is_empty()) {
+                let owners: Vec<String> = owners.iter().map(|o| format!("`radiosity {o}`")).collect();
+                eprintln!(
+                    "error: `{flag}` is not an option of `radiosity {current}`; {} {} it\n\nFor the options of `{current}`, try 'radiosity {current} --help'.",
+                    owners.join(" and "),
+                    if owners.len() == 1 { "takes" } else { "take" }
+                );
+                return ExitCode::from(2);
+            }
+        }
+    }
+    e.exit()
 }

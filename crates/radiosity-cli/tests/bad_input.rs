@@ -756,6 +756,25 @@ fn flags_for_a_part_the_run_does_not_use_are_answered() {
     assert!(files_in(&d).is_empty(), "{:?}", files_in(&d));
 }
 
+/// A flag of another subcommand (`solve --frames`) is named as such, not answered by
+/// clap's nearest spelling ("a similar argument exists: '--rays'").
+#[test]
+fn a_flag_of_another_subcommand_names_that_subcommand() {
+    let d = case_dir("other-subcommand");
+    let (code, err, _) = run_in(&d, &["solve", "cornell", "--frames", "f"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("`--frames` is not an option of `radiosity solve`; `radiosity render` takes it"), "{err}");
+    assert!(!err.contains("--rays"), "{err}");
+    let (code, err, _) = run_in(&d, &["solve", "cornell", "--exposure=2"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("`--exposure` is not an option of `radiosity solve`; `radiosity render` and `radiosity bake` take it"), "{err}");
+    // A flag no subcommand takes keeps clap's answer.
+    let (code, err, _) = run_in(&d, &["solve", "cornell", "--no-such-flag"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("unexpected argument '--no-such-flag'"), "{err}");
+    assert!(files_in(&d).is_empty(), "{:?}", files_in(&d));
+}
+
 /// `compare --light-threshold nan` masked nothing and said so nowhere: refused.
 #[test]
 fn compare_light_threshold_nan_is_refused() {
