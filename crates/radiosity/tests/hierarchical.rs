@@ -1671,3 +1671,137 @@ fn auto_picks_the_hierarchy_for_furnished_rooms_and_matches_the_path_tracer_per_
         assert!(errs[0].0.abs() <= worst_max, "{scene}: {} off by {:+.3}", errs[0].1, errs[0].0);
     }
 }
+
+/// Diagnostic (ignored): the rows path's row sums against each element's closure by rays
+/// (`MODEL`, default office2): where point-sampled rows lose light.
+#[test]
+#[ignore]
+fn rows_against_closure() {
+    let rel = std::env::var("MODEL").unwrap_or_else(|_| "scenes/renderpark-office2/office2.obj".into());
+    let Some(path) = common::shared(&rel) else {
+        return;
+    };
+    let scene = radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    let mut s = Settings { transport: Kind::Rows, ..Default::default() };
+    s.solve.max_iterations = 1;
+    let sol = solve_scene(scene, &s, &NoProgress).unwrap();
+    let sums = sol.transport.as_ref().unwrap().row_sums();
+    let area = sol.receivers.open_areas(&sol.mesh);
+    let diag = sol.scene.diagonal();
+    let mut rnd = common::xorshift(777);
+    let rays_n: usize = std::env::var("RAYS").ok().and_then(|x| x.parse().ok()).unwrap_or(256);
+    let mut rows: Vec<(usize, f64, f64)> = Vec::new();
+    for i in 0..sol.mesh.len() {
+        if area[i] <= 0.0 || sol.receivers.open_fraction[i] < 1.0 {
+            continue;
+        }
+        let e = &sol.mesh.elements[i];
+        let mut hit = 0;
+        for _ in 0..rays_n {
+            let p = e.point(&sol.mesh.positions, rnd(), rnd()) + e.normal * 1e-6 * diag;
+            let dir = cosine_about(e.normal, rnd(), rnd());
+            if let Some((_, q)) = sol.rays.closest_facing(p.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch)) {
+                if sol.scene.polygons[q as usize].normal.dot(dir) < 0.0 {
+                    hit += 1;
+                }
+            }
+        }
+        rows.push((i, sums[i], hit as f64 / rays_n as f64));
+    }
+    let (mut a_s, mut a_c, mut a) = (0.0, 0.0, 0.0);
+    for &(i, s, c) in &rows {
+        a += area[i];
+        a_s += area[i] * s;
+        a_c += area[i] * c;
+    }
+    println!("{} open elements: area-weighted row sum {:.4}, closure {:.4}", rows.len(), a_s / a, a_c / a);
+    // Deficit by closure bin.
+    for lo in [0.0, 0.5, 0.8, 0.9, 0.95, 0.99] {
+        let sel: Vec<_> = rows.iter().filter(|r| r.2 >= lo).collect();
+        let (s, c, w): (f64, f64, f64) = sel.iter().fold((0.0, 0.0, 0.0), |acc, r| (acc.0 + area[r.0] * r.1, acc.1 + area[r.0] * r.2, acc.2 + area[r.0]));
+        println!("closure ≥ {lo}: {} elements, sum {:.4} closure {:.4}", sel.len(), s / w, c / w);
+    }
+    let sd = |c: f64| (c * (1.0 - c) / rays_n as f64).sqrt().max(1.0 / rays_n as f64);
+    let mut worst: Vec<_> = rows.iter().map(|&(i, s, c)| ((s - c) / sd(c), i, s, c)).collect();
+    worst.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let top: usize = std::env::var("TOP").ok().and_then(|x| x.parse().ok()).unwrap_or(15);
+    for &(z, i, s, c) in worst.iter().take(top) {
+        let e = &sol.mesh.elements[i];
+        println!(
+            "low  z {z:6.1}: element {i} sum {s:.4} closure {c:.4} area {:.2e} at {:.2?} n {:.2?} line {:?}",
+            area[i],
+            e.centroid,
+            e.normal,
+            sol.scene.polygons[e.patch as usize].loc.as_ref().and_then(|l| l.line)
+        );
+    }
+    let below = worst.iter().filter(|w| w.0 < -3.0).count();
+    let above = worst.iter().filter(|w| w.0 > 3.0).count();
+    println!("{below} rows more than 3 sd below their closure, {above} above");
+}
+
+/// Diagnostic (ignored): one element's row on the rows path against rays (`MODEL`,
+/// `ELEMENT`): the entries that differ most from the share of rays landing on each element.
+#[test]
+#[ignore]
+fn row_entries_against_rays() {
+    let rel = std::env::var("MODEL").unwrap_or_else(|_| "scenes/renderpark-classroom/classroom.obj".into());
+    let Some(path) = common::shared(&rel) else {
+        return;
+    };
+    let i: usize = std::env::var("ELEMENT").ok().and_then(|x| x.parse().ok()).unwrap_or(4667);
+    let scene = radiosity::scene::load_scene(path.to_str().unwrap()).unwrap();
+    let mut s = Settings { transport: Kind::Rows, ..Default::default() };
+    s.solve.max_iterations = 1;
+    let sol = solve_scene(scene, &s, &NoProgress).unwrap();
+    let Some(radiosity::transport::Operator::Rows(rows)) = sol.transport.as_ref() else { panic!("rows") };
+    let (cols, vals) = rows.row(i);
+    let n_rays: usize = std::env::var("RAYS").ok().and_then(|x| x.parse().ok()).unwrap_or(200_000);
+    let locator = radiosity::mesh::Locator::new(&sol.mesh);
+    let e = &sol.mesh.elements[i];
+    let diag = sol.scene.diagonal();
+    let mut rnd = common::xorshift(99);
+    let mut hits: std::collections::HashMap<usize, f64> = Default::default();
+    for _ in 0..n_rays {
+        let p = e.point(&sol.mesh.positions, rnd(), rnd()) + e.normal * 1e-6 * diag;
+        let dir = cosine_about(e.normal, rnd(), rnd());
+        if let Some((h, q)) = sol.rays.closest_facing(p.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(e.patch)) {
+            if sol.scene.polygons[q as usize].normal.dot(dir) < 0.0 {
+                let j = locator.locate(&sol.mesh, q, p + dir * h.t as f64) as usize;
+                *hits.entry(j).or_default() += 1.0 / n_rays as f64;
+            }
+        }
+    }
+    let mut all: std::collections::BTreeMap<usize, (f64, f64)> = Default::default();
+    for (&j, &f) in cols.iter().zip(vals) {
+        all.entry(j as usize).or_default().0 = f as f64;
+    }
+    for (&j, &m) in &hits {
+        all.entry(j).or_default().1 = m;
+    }
+    let (sf, sm): (f64, f64) = all.values().fold((0.0, 0.0), |a, v| (a.0 + v.0, a.1 + v.1));
+    println!(
+        "element {i} at {:.3?} n {:.2?} area {:.2e} (open {:.3}) line {:?}: row {sf:.4}, rays {sm:.4}, {} entries",
+        e.centroid,
+        e.normal,
+        e.area,
+        sol.receivers.open_fraction[i],
+        sol.scene.polygons[e.patch as usize].loc.as_ref().and_then(|l| l.line),
+        cols.len()
+    );
+    let mut d: Vec<_> = all.into_iter().collect();
+    d.sort_by(|a, b| (b.1 .1 - b.1 .0).abs().total_cmp(&(a.1 .1 - a.1 .0).abs()));
+    for (j, (f, m)) in d.iter().take(12) {
+        let ej = &sol.mesh.elements[*j];
+        println!(
+            "   j {j}: row {f:.5} rays {m:.5} (sd {:.5}) at {:.3?} n {:.2?} area {:.2e} open {:.3} line {:?} dist {:.3}",
+            (m * (1.0 - m) / n_rays as f64).sqrt(),
+            ej.centroid,
+            ej.normal,
+            ej.area,
+            sol.receivers.open_fraction[*j],
+            sol.scene.polygons[ej.patch as usize].loc.as_ref().and_then(|l| l.line),
+            (ej.centroid - e.centroid).length()
+        );
+    }
+}
