@@ -83,7 +83,7 @@ fn main() -> ExitCode {
 fn usage_error(e: clap::Error) -> ExitCode {
     use clap::error::{ContextKind, ContextValue, ErrorKind};
     if e.kind() == ErrorKind::UnknownArgument {
-        if let (Some(ContextValue::String(arg)), Some(current)) = (e.get(ContextKind::InvalidArg), std::env::args().nth(1)) {
+        if let (Some(ContextValue::String(arg)), Some(current)) = (e.get(ContextKind::InvalidArg), std::env::args_os().nth(1).and_then(|a| a.into_string().ok())) {
             let flag = arg.split('=').next().unwrap_or(arg);
             let cmd = Cli::command();
             let takes = |s: &clap::Command| {
