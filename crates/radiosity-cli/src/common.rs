@@ -74,6 +74,11 @@ pub struct SolveFlags {
     /// they stop at a minimum size].
     #[arg(long, value_name = "N")]
     pub link_closure_rays: Option<usize>,
+    /// Hierarchical: pairs of nodes up to this many times the minimum size that are not
+    /// well separated but carry less than --link-tolerance are linked as they stand (BF
+    /// refinement) instead of split down to the minimum size; 0 splits them all.
+    #[arg(long, value_name = "X", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_COARSE_SIZE)]
+    pub link_coarse_size: f64,
     /// Memory the form-factor rows or the hierarchical links may use (e.g. 8G, 512M):
     /// refused before any work when the prediction is above it [default: the memory
     /// available].
@@ -179,6 +184,7 @@ impl SolveFlags {
             min_size: self.link_min_size,
             direct_columns: !self.emitters_in_links,
             closure_rays: self.link_closure_rays,
+            coarse_size: self.link_coarse_size,
         };
         links.validate()?;
         let hierarchical = transport == radiosity::transport::Kind::Hierarchical;

@@ -45,7 +45,13 @@
 //!   most the size): two such nodes are linked as they are, separated or not, their factor
 //!   integrated point by point with visibility ([`Ctx::terminal_factor`]). This bounds
 //!   the links by the scene's area rather than its polygon count: a chair of 500 triangles
-//!   exchanges light with the room as one cluster.
+//!   exchanges light with the room as one cluster. Near the minimum size BF refinement
+//!   also stops the split: a pair of nodes at most [`Options::coarse_size`] × the minimum
+//!   size, not well separated but not close (ratio below [`COARSE_SEPARATION`] × θ), whose
+//!   estimated link carries less than the tolerance is linked as it stands, integrated
+//!   like a terminal link (`Ctx::coarse`). Without it every such pair goes down to the
+//!   minimum size, and the links grow as the square of the nodes at that size (Sponza:
+//!   12.7 M links on 4 765 such nodes; 4.25 M with it).
 //!
 //! Emitted light needs no links when the emitting elements are few
 //! ([`Options::direct_columns`]): every element gets point-sampled factors to each of them
@@ -140,6 +146,13 @@ pub struct Options {
     /// [`crate::transport::Hierarchy::from_parts`]). 0: no closure fit. `None`:
     /// [`default_closure_rays`] for the minimum size.
     pub closure_rays: Option<usize>,
+    /// BF refinement near the minimum size: a pair of nodes at most this many times the
+    /// minimum size that is not well separated (but not closer than
+    /// [`COARSE_SEPARATION`] × the separation allows), whose link carries less than
+    /// `tolerance`, is linked as it stands with a factor integrated point by point, not
+    /// split down to the minimum size. 0: every such pair is split. No effect where links
+    /// go down to the elements (minimum size 0).
+    pub coarse_size: f64,
 }
 
 /// Elements per group whose closure rays are pooled (see [`Closure`]).
@@ -191,6 +204,18 @@ pub const DEFAULT_TOLERANCE: f64 = 1e-6;
 /// Default [`Options::visibility_rays`].
 pub const DEFAULT_VISIBILITY_RAYS: usize = 8;
 
+/// Default [`Options::coarse_size`]. Sponza under the sky (4 765 nodes at its minimum
+/// size, 2.31): links 12.7 M → 4.25 M, the solve's links and products about half the time,
+/// per-object median 4.51 → 4.50 %, courtyard image 3.28 → 3.26 %; the conference room
+/// 1.32 M → 0.69 M links, escaped −0.55 → −0.12 % (less light created), image 3.63 → 3.72 %
+/// (BENCHMARKS.md, "Fourteenth round"). At 2 it links little (Sponza 11.0 M).
+pub const DEFAULT_COARSE_SIZE: f64 = 4.0;
+
+/// [`Options::coarse_size`] applies to pairs whose separation ratio is below this many
+/// times the separation (2.0 at the default 0.5): closer pairs (touching, overlapping)
+/// are split down to the minimum size whatever their power.
+pub const COARSE_SEPARATION: f64 = 4.0;
+
 impl Default for Options {
     fn default() -> Self {
         Options {
@@ -201,6 +226,7 @@ impl Default for Options {
             min_size: None,
             direct_columns: true,
             closure_rays: None,
+            coarse_size: DEFAULT_COARSE_SIZE,
         }
     }
 }
@@ -218,6 +244,7 @@ impl Options {
             (self.min_size != d.min_size, "--link-min-size"),
             (self.direct_columns != d.direct_columns, "--emitters-in-links"),
             (self.closure_rays != d.closure_rays, "--link-closure-rays"),
+            (self.coarse_size != d.coarse_size, "--link-coarse-size"),
         ]
         .into_iter()
         .filter_map(|(changed, flag)| changed.then_some(flag))
@@ -237,6 +264,9 @@ impl Options {
         }
         if let Some(m) = self.closure_rays.filter(|m| *m > 1024) {
             return Err(Error::Invalid(format!("closure rays must be at most 1024, got {m}")));
+        }
+        if !(self.coarse_size >= 0.0 && self.coarse_size <= 1e6) {
+            return Err(Error::Invalid(format!("link coarse size must be in [0, 1e6] (times the minimum size), got {}", self.coarse_size)));
         }
         if self.visibility_rays == 0 || self.visibility_rays > 1024 {
             return Err(Error::Invalid(format!("link visibility rays must be between 1 and 1024, got {}", self.visibility_rays)));
@@ -408,6 +438,8 @@ struct Counts {
     rays: u64,
     /// Links between two nodes at the minimum size, not well separated.
     terminal: u64,
+    /// Links made where they stand by BF refinement near the minimum size (`Ctx::coarse`).
+    coarse: u64,
 }
 
 /// Links every maximal surface node of `tree` against the whole tree; returns the
@@ -593,6 +625,7 @@ pub fn link(
         stats.pairs_examined += c.pairs;
         stats.partial_refined += c.partial;
         stats.terminal_links += c.terminal;
+        stats.coarse_links += c.coarse;
     }
     let emitters = ctx.direct.clone();
     // Rays find emitted light poorly where it is concentrated: traced rows only where the
@@ -953,11 +986,13 @@ impl Ctx<'_> {
             if terminal && ratio.is_infinite() && self.open_overlap(r, s, &mut stack) {
                 continue;
             }
-            if terminal && ratio >= self.opts.separation {
+            let coarse = !terminal && ratio >= self.opts.separation && self.coarse(r, s, ratio, &mut scratch);
+            if (terminal || coarse) && ratio >= self.opts.separation {
                 // Near each other: integrated with the rays themselves.
                 let near = self.near(r, s);
                 let (f, _) = self.terminal_factor(r, s, near, &mut rng, c, &mut scratch);
-                c.terminal += 1;
+                c.terminal += terminal as u64;
+                c.coarse += coarse as u64;
                 if f > 0.0 {
                     let dir = if ns.surface { Link::MEAN } else { self.reading(r, s, near) };
                     links.push(Link { r, s, f: f as f32, g: [0.0; 3], dir, near });
@@ -1146,6 +1181,40 @@ impl Ctx<'_> {
         !(min_dot * cos > max_len * sin + self.eps)
     }
 
+    /// BF refinement near the minimum size: true for a pair that is not well separated
+    /// but not close either (ratio below [`COARSE_SEPARATION`] × the separation), both
+    /// nodes at most [`Options::coarse_size`] × the minimum size, whose estimated link
+    /// carries at most the link tolerance: it is linked where it stands, its factor
+    /// integrated point by point like a terminal link's, instead of being split down to the
+    /// minimum size. Never towards concentrated emitters (a cluster takes none of their
+    /// light).
+    fn coarse(&self, r: u32, s: u32, ratio: f64, sc: &mut Scratch) -> bool {
+        let k = self.opts.coarse_size;
+        if !(k > 0.0 && self.min_size > 0.0 && ratio < COARSE_SEPARATION * self.opts.separation) {
+            return false;
+        }
+        if self.sharp && self.emits_any[s as usize] {
+            return false;
+        }
+        let (nr, ns) = (self.node(r), self.node(s));
+        if nr.size() > k * self.min_size || ns.size() > k * self.min_size {
+            return false;
+        }
+        let near = self.near(r, s);
+        let f = if nr.surface {
+            self.estimate(r, s, ratio, near, sc).0
+        } else {
+            let d = ns.centroid.as_dvec3() - nr.centroid.as_dvec3();
+            let r2 = d.length_squared();
+            if !(r2 > 0.0) {
+                return false;
+            }
+            disk_factor(self.projected(s, -d / r2.sqrt(), near), r2)
+        };
+        let power = f * nr.area as f64 * self.b_hat[s as usize] as f64 * self.rho[r as usize] as f64;
+        power <= self.power_eps
+    }
+
     /// True when node `k` may be split to refine a link: not a leaf, and larger than
     /// [`Options::min_size`] both across and in area (`min_size²`).
     #[inline]
@@ -1198,12 +1267,14 @@ impl Ctx<'_> {
         if terminal && ratio.is_infinite() && self.open_overlap(r, s, stack) {
             return;
         }
-        if terminal && ratio >= self.opts.separation {
+        let coarse = !terminal && ratio >= self.opts.separation && self.coarse(r, s, ratio, sc);
+        if (terminal || coarse) && ratio >= self.opts.separation {
             // Near each other: the power R receives integrated with the rays, spread to
             // R's elements by their normals about the mean direction of arrival.
             let near = self.near(r, s);
             let (f, d) = self.terminal_factor(r, s, near, rng, c, sc);
-            c.terminal += 1;
+            c.terminal += terminal as u64;
+            c.coarse += coarse as u64;
             if f > 0.0 && d != DVec3::ZERO {
                 let spread = self.tree.front_area(r, d, !near);
                 if spread > 1e-6 * nr.area as f64 {
