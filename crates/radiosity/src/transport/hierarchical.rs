@@ -596,8 +596,9 @@ pub struct HierarchyStats {
     /// Links between two nodes at the minimum size that are not well separated (their
     /// factor integrated point by point, see [`crate::form_factor::hierarchical`]).
     pub terminal_links: u64,
-    /// Links made above the minimum size by BF refinement (not well separated, carrying
-    /// less than the link tolerance; [`crate::form_factor::hierarchical::Options::coarse_size`]).
+    /// Pairs linked above the minimum size by BF refinement (not well separated, carrying
+    /// less than the link tolerance; [`crate::form_factor::hierarchical::Options::coarse_size`]),
+    /// counted when integrated like `terminal_links` (a hidden pair stores no link).
     pub coarse_links: u64,
     /// Leaves whose links summed above one and were scaled to one.
     pub rows_scaled: u64,
