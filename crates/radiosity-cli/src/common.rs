@@ -75,8 +75,9 @@ pub struct SolveFlags {
     #[arg(long, value_name = "N")]
     pub link_closure_rays: Option<usize>,
     /// Hierarchical: pairs of nodes up to this many times the minimum size that are not
-    /// well separated but carry less than --link-tolerance are linked as they stand (BF
-    /// refinement) instead of split down to the minimum size; 0 splits them all.
+    /// well separated but carry at most --link-tolerance of the scene's power are linked
+    /// as they stand (BF refinement) instead of split down to the minimum size; 0 splits
+    /// them all.
     #[arg(long, value_name = "X", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_COARSE_SIZE)]
     pub link_coarse_size: f64,
     /// Memory the form-factor rows or the hierarchical links may use (e.g. 8G, 512M):

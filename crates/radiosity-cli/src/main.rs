@@ -94,7 +94,8 @@ fn usage_error(e: clap::Error) -> ExitCode {
             let mine = cmd.find_subcommand(&current);
             let owners: Vec<&str> =
                 cmd.get_subcommands().filter(|s| s.get_name() != current && takes(s)).map(|s| s.get_name()).collect();
-            if let (Some(_), false) = (mine, owners.is_empty()) {
+            // A subcommand with subcommands of its own (`bench rays`): clap's answer.
+            if let (Some(false), false) = (mine.map(|m| m.has_subcommands()), owners.is_empty()) {
                 let owners: Vec<String> = owners.iter().map(|o| format!("`radiosity {o}`")).collect();
                 eprintln!(
                     "error: `{flag}` is not an option of `radiosity {current}`; {} {} it\n\nFor the options of `{current}`, try 'radiosity {current} --help'.",

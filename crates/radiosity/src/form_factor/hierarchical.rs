@@ -148,8 +148,8 @@ pub struct Options {
     pub closure_rays: Option<usize>,
     /// BF refinement near the minimum size: a pair of nodes at most this many times the
     /// minimum size that is not well separated (but not closer than
-    /// [`COARSE_SEPARATION`] × the separation allows), whose link carries less than
-    /// `tolerance`, is linked as it stands with a factor integrated point by point, not
+    /// [`COARSE_SEPARATION`] × the separation allows), whose link carries at most
+    /// `tolerance` × the scene's total power, is linked as it stands with a factor integrated point by point, not
     /// split down to the minimum size. 0: every such pair is split. No effect where links
     /// go down to the elements (minimum size 0).
     pub coarse_size: f64,
@@ -1184,10 +1184,12 @@ impl Ctx<'_> {
     /// BF refinement near the minimum size: true for a pair that is not well separated
     /// but not close either (ratio below [`COARSE_SEPARATION`] × the separation), both
     /// nodes at most [`Options::coarse_size`] × the minimum size, whose estimated link
-    /// carries at most the link tolerance: it is linked where it stands, its factor
-    /// integrated point by point like a terminal link's, instead of being split down to the
-    /// minimum size. Never towards concentrated emitters (a cluster takes none of their
-    /// light).
+    /// carries at most `tolerance × total power` (`power_eps`): it is linked where it
+    /// stands, its factor integrated point by point like a terminal link's, instead of
+    /// being split down to the minimum size. Never towards concentrated emitters (their
+    /// light needs the refinement; a cluster takes none of it). A cluster receiver's coarse
+    /// link, like a terminal one, is spread over its front faces whether partly visible or
+    /// not (the power limit bounds what that moves).
     fn coarse(&self, r: u32, s: u32, ratio: f64, sc: &mut Scratch) -> bool {
         let k = self.opts.coarse_size;
         if !(k > 0.0 && self.min_size > 0.0 && ratio < COARSE_SEPARATION * self.opts.separation) {
