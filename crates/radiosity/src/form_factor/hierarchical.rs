@@ -48,7 +48,7 @@
 //!   exchanges light with the room as one cluster. Near the minimum size BF refinement
 //!   also stops the split: a pair of nodes at most [`Options::coarse_size`] × the minimum
 //!   size, not well separated but not close (ratio below [`COARSE_SEPARATION`] × θ), whose
-//!   estimated link carries less than the tolerance is linked as it stands, integrated
+//!   estimated link carries at most the tolerance is linked as it stands, integrated
 //!   like a terminal link (`Ctx::coarse`). Without it every such pair goes down to the
 //!   minimum size, and the links grow as the square of the nodes at that size (Sponza:
 //!   12.7 M links on 4 765 such nodes; 4.25 M with it).
@@ -149,8 +149,8 @@ pub struct Options {
     /// BF refinement near the minimum size: a pair of nodes at most this many times the
     /// minimum size that is not well separated (but not closer than
     /// [`COARSE_SEPARATION`] × the separation allows), whose link carries at most
-    /// `tolerance` × the scene's total power, is linked as it stands with a factor integrated point by point, not
-    /// split down to the minimum size. 0: every such pair is split. No effect where links
+    /// `tolerance` × the scene's total power, is linked as it stands with a factor
+    /// integrated point by point, not split down to the minimum size. 0: every such pair is split. No effect where links
     /// go down to the elements (minimum size 0).
     pub coarse_size: f64,
 }
@@ -438,7 +438,8 @@ struct Counts {
     rays: u64,
     /// Links between two nodes at the minimum size, not well separated.
     terminal: u64,
-    /// Links made where they stand by BF refinement near the minimum size (`Ctx::coarse`).
+    /// Pairs integrated where they stand by BF refinement near the minimum size
+    /// (`Ctx::coarse`).
     coarse: u64,
 }
 
@@ -986,13 +987,10 @@ impl Ctx<'_> {
             if terminal && ratio.is_infinite() && self.open_overlap(r, s, &mut stack) {
                 continue;
             }
-            let coarse = !terminal && ratio >= self.opts.separation && self.coarse(r, s, ratio, &mut scratch);
-            if (terminal || coarse) && ratio >= self.opts.separation {
+            if self.integrate_here(terminal, r, s, ratio, &mut scratch, c) {
                 // Near each other: integrated with the rays themselves.
                 let near = self.near(r, s);
                 let (f, _) = self.terminal_factor(r, s, near, &mut rng, c, &mut scratch);
-                c.terminal += terminal as u64;
-                c.coarse += coarse as u64;
                 if f > 0.0 {
                     let dir = if ns.surface { Link::MEAN } else { self.reading(r, s, near) };
                     links.push(Link { r, s, f: f as f32, g: [0.0; 3], dir, near });
@@ -1181,6 +1179,22 @@ impl Ctx<'_> {
         !(min_dot * cos > max_len * sin + self.eps)
     }
 
+    /// Whether a pair that is not well separated (`ratio ≥ θ`) is linked as it stands with
+    /// its factor integrated point by point: two nodes at the minimum size (`terminal`), or
+    /// a pair [`Ctx::coarse`] lets stop above it. Counts which.
+    fn integrate_here(&self, terminal: bool, r: u32, s: u32, ratio: f64, sc: &mut Scratch, c: &mut Counts) -> bool {
+        if ratio < self.opts.separation {
+            return false;
+        }
+        if terminal {
+            c.terminal += 1;
+            return true;
+        }
+        let coarse = self.coarse(r, s, ratio, sc);
+        c.coarse += coarse as u64;
+        coarse
+    }
+
     /// BF refinement near the minimum size: true for a pair that is not well separated
     /// but not close either (ratio below [`COARSE_SEPARATION`] × the separation), both
     /// nodes at most [`Options::coarse_size`] × the minimum size, whose estimated link
@@ -1269,14 +1283,11 @@ impl Ctx<'_> {
         if terminal && ratio.is_infinite() && self.open_overlap(r, s, stack) {
             return;
         }
-        let coarse = !terminal && ratio >= self.opts.separation && self.coarse(r, s, ratio, sc);
-        if (terminal || coarse) && ratio >= self.opts.separation {
+        if self.integrate_here(terminal, r, s, ratio, sc, c) {
             // Near each other: the power R receives integrated with the rays, spread to
             // R's elements by their normals about the mean direction of arrival.
             let near = self.near(r, s);
             let (f, d) = self.terminal_factor(r, s, near, rng, c, sc);
-            c.terminal += terminal as u64;
-            c.coarse += coarse as u64;
             if f > 0.0 && d != DVec3::ZERO {
                 let spread = self.tree.front_area(r, d, !near);
                 if spread > 1e-6 * nr.area as f64 {

@@ -597,7 +597,7 @@ pub struct HierarchyStats {
     /// factor integrated point by point, see [`crate::form_factor::hierarchical`]).
     pub terminal_links: u64,
     /// Pairs linked above the minimum size by BF refinement (not well separated, carrying
-    /// less than the link tolerance; [`crate::form_factor::hierarchical::Options::coarse_size`]),
+    /// at most the link tolerance; [`crate::form_factor::hierarchical::Options::coarse_size`]),
     /// counted when integrated like `terminal_links` (a hidden pair stores no link).
     pub coarse_links: u64,
     /// Leaves whose links summed above one and were scaled to one.
