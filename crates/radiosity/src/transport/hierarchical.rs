@@ -17,8 +17,10 @@
 //! so it costs O(nodes + links), not O(n²). Pushing irradiance (a value per unit area) down
 //! and pulling area-weighted means up conserves power exactly: the power a link carries,
 //! `f · B̄_S · A_R`, is what the receiver's leaves receive (`Σ_{i∈R} A_i · f · B̄_S`). `s_i ≤ 1` is
-//! the row guard: leaves whose links sum above one are scaled to one (as
-//! [`crate::form_factor::RowGuard`] does for explicit rows). Gradients, directional
+//! the row guard: leaves whose row sums above one are scaled to one (as
+//! [`crate::form_factor::RowGuard`] does for explicit rows), by scaling what the links
+//! bring and leaving the exact direct columns and traced rows alone where they fit
+//! (`Hierarchy::guard_rows`). Gradients, directional
 //! readings and normal-dependent pushes extrapolate, so rows summing to one could still
 //! amplify a non-uniform `x` a little (the conference room in a furnace went 7 % above the
 //! bound E/(1 − ρ) in two Jacobi sweeps): a directional reading is held to the largest
@@ -756,8 +758,12 @@ pub struct Hierarchy {
     /// The closure the links were fitted to, kept to fit them again without the elements
     /// whose rows are traced ([`Hierarchy::set_ray_rows`]).
     closure: Option<Closure>,
-    /// Per element: scale applied to what it gathers (1 unless its links summed above 1).
+    /// Per element: the row guard's scale on what its links bring (1 unless its row summed
+    /// above 1; see [`Hierarchy::guard_rows`]).
     scale: Vec<f32>,
+    /// Per element: the row guard's scale on its direct columns and traced row (1 unless
+    /// those alone sum above 1).
+    fixed_scale: Vec<f32>,
     /// Exact factors from every element to the emitting elements, when emitted light
     /// travels outside the links (see [`crate::form_factor::hierarchical::Options::direct_columns`]).
     direct: Option<SparseRows>,
@@ -922,6 +928,7 @@ impl Hierarchy {
             link_scale: vec![1.0; n],
             closure: None,
             scale: vec![1.0; n],
+            fixed_scale: vec![1.0; n],
             direct,
             ray_rows: None,
             stats,
@@ -971,10 +978,18 @@ impl Hierarchy {
         self.stats.ray_row_entries = rr.nnz() as u64;
         self.ray_rows = Some(rr);
         self.scale = vec![1.0; n];
+        self.fixed_scale = vec![1.0; n];
         self.guard_rows();
     }
 
-    /// Measures every row sum and scales rows above one to one (the row guard).
+    /// Measures every row sum and scales rows above one to one (the row guard): what the
+    /// links bring first, the direct columns and traced rows only where they alone sum
+    /// above one. Those are per-element factors with shadow rays; the links are what
+    /// overcounts (near contact, and where a cluster receiver hands a face light from
+    /// directions its neighbours hide), and scaling the whole row took the lamp's exact
+    /// light from the housing around it along with the links' excess (a two-sided
+    /// classroom lamp housing: its row summed to 1.34, and 25 % of the tube's light on it
+    /// went missing).
     fn guard_rows(&mut self) {
         let h = self;
         // Row sums: the product with x = 1 (every node's mean is 1).
@@ -985,7 +1000,14 @@ impl Hierarchy {
         let mut worst = None;
         for (i, &s) in sums.iter().enumerate() {
             if s > 1.0 {
-                h.scale[i] = (1.0 / s) as f32;
+                let fixed = h.direct.as_ref().map_or(0.0, |d| d.row_sum(i)) + h.ray_rows.as_ref().map_or(0.0, |r| r.row_sum(i));
+                let links = s - fixed;
+                if fixed < 1.0 && links > 0.0 {
+                    h.scale[i] = ((1.0 - fixed) / links) as f32;
+                } else {
+                    h.scale[i] = 0.0;
+                    h.fixed_scale[i] = (1.0 / fixed.max(1.0)) as f32;
+                }
             }
             // Covered elements (no open area) gather but count for nothing.
             if h.tree.nodes[h.tree.leaf_of[i] as usize].area > 0.0 {
@@ -1216,15 +1238,18 @@ impl Hierarchy {
         // Jacobi stays below E/(1 − ρ)).
         let top = hi.first().copied().unwrap_or(Rgb::ZERO);
         y.par_iter_mut().enumerate().with_min_len(256).for_each(|(e, ye)| {
-            *ye *= self.link_scale[e] as f64;
+            *ye *= self.link_scale[e] as f64 * if guard { self.scale[e] as f64 } else { 1.0 };
+            let mut fixed = Rgb::ZERO;
             if let Some(d) = self.direct.as_ref().filter(|_| direct) {
-                *ye += d.gather_row(e, x);
+                fixed += d.gather_row(e, x);
             }
             if let Some(r) = &self.ray_rows {
-                *ye += r.gather_row(e, x);
+                fixed += r.gather_row(e, x);
             }
             if guard {
-                *ye = (*ye * self.scale[e] as f64).min(top);
+                *ye = (*ye + fixed * self.fixed_scale[e] as f64).min(top);
+            } else {
+                *ye += fixed;
             }
         });
         if let Ok(mut kept) = self.buffers.0.lock() {
@@ -1524,7 +1549,7 @@ impl Transport for Hierarchy {
             + self.link_g.len() * 12
             + self.link_dir.len() * 16
             + (self.g_base.len() + self.dir_base.len() + self.cluster_count.len()) * 4
-            + (self.scale.len() + self.link_scale.len()) * 4
+            + (self.scale.len() + self.fixed_scale.len() + self.link_scale.len()) * 4
             + self.closure.as_ref().map_or(0, |c| (c.fraction.len() + c.group.len()) * 4)
             + self.direct.as_ref().map_or(0, |d| d.nnz() * 8 + (d.n() + 1) * 8)
             + self.ray_rows.as_ref().map_or(0, |d| d.nnz() * 8 + (d.n() + 1) * 8)
