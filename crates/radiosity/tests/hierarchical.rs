@@ -1913,6 +1913,7 @@ fn columns_against_rays() {
         s.solve.max_iterations = 1;
     }
     s.links.min_size = env_f("MIN_SIZE");
+    s.mesh_size = env_f("MESH");
     if let Some(c) = env_f("COARSE") {
         s.links.coarse_size = c;
     }
