@@ -1210,6 +1210,7 @@ fn link_truth() {
             p.loc.as_ref().and_then(|l| l.line) == Some(line)
                 && sol.receivers.open_fraction[i] >= 1.0
                 && std::env::var("ELEMENT").map_or(true, |e| e == i.to_string())
+                && std::env::var("BACK").map_or(true, |b| (b == "1") == p.back_side)
         })
         .collect();
     println!("{} candidate elements on line {line}", cands.len());
