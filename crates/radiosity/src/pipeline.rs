@@ -398,7 +398,7 @@ impl Prepared {
                         let lifted = h.stats.rows_lifted;
                         let by_links = h.stats.rows_scaled - lifted;
                         let w = format!(
-                            "hierarchical links: {} element(s) whose links summed above 1 were scaled to 1 (largest raw sum {:.4} at element {}): \
+                            "hierarchical links: {} element(s) whose rows summed above 1 had what their links bring scaled so that the row sums to 1 (largest raw sum {:.4} at element {}): \
                              {by_links} by their links alone, which happens near coincident, touching or interpenetrating surfaces{}",
                             h.stats.rows_scaled,
                             h.stats.max_row_sum,

@@ -154,6 +154,33 @@ fn the_hierarchys_row_guard_names_its_worst_element() {
             })
             .count() as u64;
         assert_eq!(h.stats.rows_lifted, lifted, "{:?}", h.stats);
+        // After the guard a row that summed above one sums to one, no less (what the
+        // links bring scaled beside the direct columns and traced rows), and the others
+        // are untouched.
+        let ones = vec![Rgb::ONE; sums.len()];
+        let mut y = vec![Rgb::ZERO; sums.len()];
+        solved.transport.as_ref().unwrap().gather(&ones, &mut y);
+        for i in (0..sums.len()).filter(|&i| open(i)) {
+            assert!((y[i].y - sums[i].min(1.0)).abs() <= 1e-4 * sums[i].max(1.0), "element {i}: raw {} guarded {}", sums[i], y[i].y);
+        }
+        // The emitters' exact light (the direct columns) is not what the guard scales:
+        // lit by the emitting elements alone, a scaled row whose direct columns fit gets
+        // all of it (scaling the whole row took a quarter of a lamp's light from its
+        // housing in the two-sided classroom).
+        if let Some(d) = h.direct() {
+            let mut x = vec![Rgb::ZERO; sums.len()];
+            for i in 0..sums.len() {
+                for &j in d.row(i).0 {
+                    x[j as usize] = Rgb::ONE;
+                }
+            }
+            solved.transport.as_ref().unwrap().gather(&x, &mut y);
+            let fixed = |i: usize| d.row_sum(i) + h.ray_rows().map_or(0.0, |r| r.row_sum(i));
+            for i in (0..sums.len()).filter(|&i| open(i) && sums[i] > 1.0 + 1e-3 && fixed(i) < 0.99) {
+                let exact = d.gather_row(i, &x).y + h.ray_rows().map_or(0.0, |r| r.gather_row(i, &x).y);
+                assert!(y[i].y >= exact * (1.0 - 1e-5), "element {i}: direct light {exact}, guarded {}", y[i].y);
+            }
+        }
         g.clone()
     };
     let scene = furnace_with(vec![

@@ -1227,8 +1227,8 @@ impl Ctx<'_> {
 
     /// The power `ρ_R · B̂_S · F̃ · A_R` a link from `s` to `r` would carry, with `F̃` the
     /// unoccluded factor estimated without rays: [`Ctx::estimate`] for a surface receiver,
-    /// a disk of `s`'s projected area seen from `r`'s centroid for a cluster. None when the
-    /// centroids coincide. Deterministic, so that choices made on it (coarse links, the
+    /// a disk of `s`'s projected area seen from `r`'s centroid for a cluster. None for a
+    /// cluster receiver whose centroid is `s`'s. Deterministic, so that choices made on it (coarse links, the
     /// quick terminal estimate) do not select the sampled factors they are made for.
     fn rough_power(&self, r: u32, s: u32, ratio: f64, near: bool, sc: &mut Scratch) -> Option<f64> {
         let (nr, ns) = (self.node(r), self.node(s));
@@ -1373,9 +1373,9 @@ impl Ctx<'_> {
     /// not sampled); the visible fraction comes from rays between the paired points,
     /// weighted by their kernel with each point of `s` standing for a disk of `A_S / N`
     /// (Wallace, Elmquist & Haines 1989), so that pairs that touch stay bounded. Also
-    /// returns the mean direction of arrival (weighted by contribution). A link whose first
-    /// estimate from `N /` [`QUICK_TERMINAL_SHARE`] pairs carries less than the link
-    /// tolerance keeps that estimate.
+    /// returns the mean direction of arrival (weighted by contribution). A link whose rough
+    /// power ([`Ctx::rough_power`], no rays) is below the link tolerance is integrated from
+    /// `N /` [`QUICK_TERMINAL_SHARE`] pairs.
     fn terminal_factor(&self, r: u32, s: u32, ratio: f64, near: bool, rng: &mut Rng, c: &mut Counts, sc: &mut Scratch) -> (f64, DVec3) {
         let m = 2 * self.opts.visibility_rays;
         let quick = (m / QUICK_TERMINAL_SHARE).max(2);

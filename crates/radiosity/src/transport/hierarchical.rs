@@ -602,7 +602,9 @@ pub struct HierarchyStats {
     /// at most the link tolerance; [`crate::form_factor::hierarchical::Options::coarse_size`]),
     /// counted when integrated like `terminal_links` (a hidden pair stores no link).
     pub coarse_links: u64,
-    /// Leaves whose links summed above one and were scaled to one.
+    /// Leaves whose row (links, direct columns, traced row) summed above one (+ 1e-3): the
+    /// guard scales what their links bring so that the row sums to one (the direct columns
+    /// and traced row too where they alone exceed one).
     pub rows_scaled: u64,
     /// Of those, the leaves whose row summed to at most one before the closure fit: the
     /// fit lifted their group towards its measured closure and them past one. The others
