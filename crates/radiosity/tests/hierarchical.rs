@@ -2059,7 +2059,6 @@ fn columns_against_rays() {
             x[j] = if weighted { sol.solution.radiosity[j] } else { Rgb::ONE };
         }
         op.gather(&x, &mut y);
-        let links_only = std::env::var("NOFIT").is_ok();
         let (mut so, mut sr) = (0.0, 0.0);
         for i in (0..n).filter(|&i| obj_of(i) == p && area[i] > 0.0) {
             let e = &sol.mesh.elements[i];
@@ -2076,7 +2075,6 @@ fn columns_against_rays() {
             let r = acc / m as f64;
             so += area[i] * y[i].y;
             sr += area[i] * r;
-            let _ = links_only;
             println!(
                 "   element {i}: area {:.3e} open {:.2} n {:.2?} at {:.2?}: operator {:.4} rays {:.4} scale {:.3}",
                 area[i],

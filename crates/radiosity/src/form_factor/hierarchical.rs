@@ -992,10 +992,10 @@ impl Ctx<'_> {
             if terminal && ratio.is_infinite() && self.open_overlap(r, s, &mut stack) {
                 continue;
             }
-            if self.integrate_here(terminal, r, s, ratio, &mut scratch, c) {
+            if let Some(minor) = self.integrate_here(terminal, r, s, ratio, &mut scratch, c) {
                 // Near each other: integrated with the rays themselves.
                 let near = self.near(r, s);
-                let (f, _) = self.terminal_factor(r, s, ratio, near, &mut rng, c, &mut scratch);
+                let (f, _) = self.terminal_factor(r, s, near, minor, &mut rng, c, &mut scratch);
                 if f > 0.0 {
                     let dir = if ns.surface { Link::MEAN } else { self.reading(r, s, near) };
                     links.push(Link { r, s, f: f as f32, g: [0.0; 3], dir, near });
@@ -1186,18 +1186,27 @@ impl Ctx<'_> {
 
     /// Whether a pair that is not well separated (`ratio ≥ θ`) is linked as it stands with
     /// its factor integrated point by point: two nodes at the minimum size (`terminal`), or
-    /// a pair [`Ctx::coarse`] lets stop above it. Counts which.
-    fn integrate_here(&self, terminal: bool, r: u32, s: u32, ratio: f64, sc: &mut Scratch, c: &mut Counts) -> bool {
+    /// a pair [`Ctx::coarse`] lets stop above it. Counts which. `Some(minor)` when it is,
+    /// with `minor` true where the link's rough power is at most the link tolerance (always
+    /// so for a coarse pair), so that the quick estimate will do ([`QUICK_TERMINAL_SHARE`]).
+    fn integrate_here(&self, terminal: bool, r: u32, s: u32, ratio: f64, sc: &mut Scratch, c: &mut Counts) -> Option<bool> {
         if ratio < self.opts.separation {
-            return false;
+            return None;
         }
         if terminal {
             c.terminal += 1;
-            return true;
+            return Some(self.minor(r, s, ratio, sc));
         }
         let coarse = self.coarse(r, s, ratio, sc);
         c.coarse += coarse as u64;
-        coarse
+        coarse.then_some(self.power_eps > 0.0)
+    }
+
+    /// True when a link from `s` to `r` carries at most the link tolerance by its rough
+    /// power ([`Ctx::rough_power`]): decided before any ray, so that choosing the quick
+    /// estimate on it does not select the draws it is made for.
+    fn minor(&self, r: u32, s: u32, ratio: f64, sc: &mut Scratch) -> bool {
+        self.power_eps > 0.0 && self.rough_power(r, s, ratio, self.near(r, s), sc).is_some_and(|p| p <= self.power_eps)
     }
 
     /// BF refinement near the minimum size: true for a pair that is not well separated
@@ -1297,11 +1306,11 @@ impl Ctx<'_> {
         if terminal && ratio.is_infinite() && self.open_overlap(r, s, stack) {
             return;
         }
-        if self.integrate_here(terminal, r, s, ratio, sc, c) {
+        if let Some(minor) = self.integrate_here(terminal, r, s, ratio, sc, c) {
             // Near each other: the power R receives integrated with the rays, spread to
             // R's elements by their normals about the mean direction of arrival.
             let near = self.near(r, s);
-            let (f, d) = self.terminal_factor(r, s, ratio, near, rng, c, sc);
+            let (f, d) = self.terminal_factor(r, s, near, minor, rng, c, sc);
             if f > 0.0 && d != DVec3::ZERO {
                 let spread = self.tree.front_area(r, d, !near);
                 if spread > 1e-6 * nr.area as f64 {
@@ -1373,14 +1382,14 @@ impl Ctx<'_> {
     /// not sampled); the visible fraction comes from rays between the paired points,
     /// weighted by their kernel with each point of `s` standing for a disk of `A_S / N`
     /// (Wallace, Elmquist & Haines 1989), so that pairs that touch stay bounded. Also
-    /// returns the mean direction of arrival (weighted by contribution). A link whose rough
-    /// power ([`Ctx::rough_power`], no rays) is below the link tolerance is integrated from
+    /// returns the mean direction of arrival (weighted by contribution). A `minor` link
+    /// (rough power at most the link tolerance, [`Ctx::minor`]) is integrated from
     /// `N /` [`QUICK_TERMINAL_SHARE`] pairs.
-    fn terminal_factor(&self, r: u32, s: u32, ratio: f64, near: bool, rng: &mut Rng, c: &mut Counts, sc: &mut Scratch) -> (f64, DVec3) {
+    #[allow(clippy::too_many_arguments)]
+    fn terminal_factor(&self, r: u32, s: u32, near: bool, minor: bool, rng: &mut Rng, c: &mut Counts, sc: &mut Scratch) -> (f64, DVec3) {
         let m = 2 * self.opts.visibility_rays;
         let quick = (m / QUICK_TERMINAL_SHARE).max(2);
-        let minor = quick < m && self.power_eps > 0.0 && self.rough_power(r, s, ratio, near, sc).is_some_and(|p| p < self.power_eps);
-        self.terminal_factor_with(r, s, near, if minor { quick } else { m }, rng, c, sc)
+        self.terminal_factor_with(r, s, near, if minor { quick.min(m) } else { m }, rng, c, sc)
     }
 
     /// [`Ctx::terminal_factor`] from `m` pairs of points.
@@ -1848,7 +1857,7 @@ mod tests {
                 let (mut c, mut sc) = (Counts::default(), Scratch::default());
                 let runs = 200;
                 let mean: f64 =
-                    (0..runs).map(|_| ctx.terminal_factor(ra, rb, separation_ratio(ctx.node(ra), ctx.node(rb)), false, &mut rng, &mut c, &mut sc).0).sum::<f64>()
+                    (0..runs).map(|_| ctx.terminal_factor(ra, rb, false, false, &mut rng, &mut c, &mut sc).0).sum::<f64>()
                         / runs as f64;
                 // The exact unoccluded factor at single points, through the tree (every node
                 // within the near budget, so every one is opened down to its elements).
@@ -1879,9 +1888,9 @@ mod tests {
             pair_with(floor_up, wall_in, 0.5, eps, |ctx, ra, rb| {
                 let mut rng = rng_for(7, 3);
                 let (mut c, mut sc) = (Counts::default(), Scratch::default());
-                let ratio = separation_ratio(ctx.node(ra), ctx.node(rb));
+                let minor = ctx.minor(ra, rb, separation_ratio(ctx.node(ra), ctx.node(rb)), &mut sc);
                 let runs = 4000;
-                let mean: f64 = (0..runs).map(|_| ctx.terminal_factor(ra, rb, ratio, false, &mut rng, &mut c, &mut sc).0).sum::<f64>() / runs as f64;
+                let mean: f64 = (0..runs).map(|_| ctx.terminal_factor(ra, rb, false, minor, &mut rng, &mut c, &mut sc).0).sum::<f64>() / runs as f64;
                 assert!((mean / exact - 1.0).abs() < 0.02, "link tolerance {eps}: terminal factor {mean:.5}, exact {exact:.5}");
             });
         }

@@ -1001,8 +1001,10 @@ impl Hierarchy {
         let mut max_sum = 0.0f64;
         let mut worst = None;
         for (i, &s) in sums.iter().enumerate() {
+            // The direct columns and traced row, which the closure fit does not scale
+            // (needed only for rows above one).
+            let fixed = if s > 1.0 { h.direct.as_ref().map_or(0.0, |d| d.row_sum(i)) + h.ray_rows.as_ref().map_or(0.0, |r| r.row_sum(i)) } else { 0.0 };
             if s > 1.0 {
-                let fixed = h.direct.as_ref().map_or(0.0, |d| d.row_sum(i)) + h.ray_rows.as_ref().map_or(0.0, |r| r.row_sum(i));
                 let links = s - fixed;
                 if fixed < 1.0 && links > 0.0 {
                     h.scale[i] = ((1.0 - fixed) / links) as f32;
@@ -1021,7 +1023,6 @@ impl Hierarchy {
                     scaled += 1;
                     // The row before the closure fit: its links unscaled, the direct
                     // columns and traced rows as they are.
-                    let fixed = h.direct.as_ref().map_or(0.0, |d| d.row_sum(i)) + h.ray_rows.as_ref().map_or(0.0, |r| r.row_sum(i));
                     let ls = f64::from(h.link_scale[i]);
                     let before = if ls > 0.0 { (s - fixed) / ls + fixed } else { s };
                     if before <= 1.0 + 1e-3 {
