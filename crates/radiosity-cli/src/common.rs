@@ -80,9 +80,10 @@ pub struct SolveFlags {
     /// them all.
     #[arg(long, value_name = "X", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_COARSE_SIZE)]
     pub link_coarse_size: f64,
-    /// Memory the form-factor rows or the hierarchical links may use (e.g. 8G, 512M):
-    /// refused before any work when the prediction is above it [default: the memory
-    /// available].
+    /// Memory the run may use (e.g. 8G, 512M): refused before any work when the prediction
+    /// is above it. Form-factor rows: their own size. Hierarchical transport: the whole
+    /// run's peak resident memory (what the process holds after loading and meshing, the
+    /// links, and the rest of the run per element) [default: the memory available].
     #[arg(long, value_name = "SIZE")]
     pub memory_limit: Option<String>,
     /// Solver: direct, jacobi, gauss-seidel, shooting, progressive, stochastic-jacobi,

@@ -333,6 +333,7 @@ impl Prepared {
             // after the coverage test) tells how much the links will need: refused now,
             // before the coverage test and the links.
             let mut tree = None;
+            let mut predicted_peak = None;
             if self.kind == transport::Kind::Hierarchical {
                 let areas: Vec<f64> = mesh.elements.iter().map(|e| e.area).collect();
                 progress.begin("tree", 1);
@@ -341,18 +342,31 @@ impl Prepared {
                 let min_size = link_min_size(settings, mesh);
                 let (_, em) = element_materials(scene, mesh);
                 let emitters = em.iter().filter(|e| e.max_element() > 0.0).count() as u64;
-                let limit = settings.form_factors.memory_limit.or_else(transport::available_memory);
-                let needed =
-                    form_factor::hierarchical::predict_memory(&built, min_size, settings.links.separation, emitters);
-                if let Some(limit) = limit.filter(|&l| needed > l) {
+                // The limit bounds the whole run's peak: what the process holds already
+                // counts against it, and the default is what is free beside that.
+                let resident = transport::resident_memory().unwrap_or(0);
+                let limit = settings
+                    .form_factors
+                    .memory_limit
+                    .or_else(|| transport::available_memory().map(|a| a.saturating_add(resident)));
+                let peak = form_factor::hierarchical::predict_peak(&built, min_size, settings.links.separation, emitters, resident);
+                if let Some(limit) = limit.filter(|&l| peak.total() > l) {
+                    let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
                     return Err(Error::TooLarge {
-                        what: format!("the hierarchical links of {} elements (predicted)", mesh.len()),
-                        needed,
+                        what: format!(
+                            "a hierarchical run on {} elements (predicted peak: {:.0} MiB held already, {:.0} MiB of links, {:.0} MiB for the rest of the run)",
+                            mesh.len(),
+                            mib(peak.resident),
+                            mib(peak.links),
+                            mib(peak.run)
+                        ),
+                        needed: peak.total(),
                         limit,
                         hint: "use a larger --mesh-size, --link-min-size or --link-separation, or raise --memory-limit"
                             .into(),
                     });
                 }
+                predicted_peak = Some(peak);
                 tree = Some(built);
             }
             let receivers = Receivers::compute_with(scene, mesh, rays, progress);
@@ -372,7 +386,7 @@ impl Prepared {
                     let (rho, em) = system_materials(scene, mesh, &self.external_irradiance);
                     let mut tree = tree.take().expect("built above");
                     tree.refit(mesh, &receivers.open_areas(mesh));
-                    let (h, rays_cast) = form_factor::hierarchical::link(
+                    let (mut h, rays_cast) = form_factor::hierarchical::link(
                         mesh,
                         rays,
                         &receivers,
@@ -386,6 +400,10 @@ impl Prepared {
                         },
                         progress,
                     )?;
+                    if let Some(p) = predicted_peak {
+                        h.stats.predicted_peak_bytes = p.total();
+                        h.stats.resident_before_bytes = p.resident;
+                    }
                     let mut warnings = Vec::new();
                     let mut guard = form_factor::RowGuard {
                         rows_corrected: h.stats.rows_scaled,

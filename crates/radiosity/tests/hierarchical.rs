@@ -225,6 +225,46 @@ fn cornell_box_agrees_with_explicit_rows() {
     assert!(h.stats.links < rows_nnz, "{} links against {rows_nnz} row entries", h.stats.links);
 }
 
+/// `--memory-limit` bounds the whole hierarchical run's peak resident memory: what the
+/// process holds already, the links and the rest of the run, predicted from the tree and
+/// refused before the coverage test and the links. The prediction's share for the links
+/// must cover what the operator really holds (on the Cornell box: predicted well above).
+#[test]
+fn memory_limit_bounds_the_predicted_peak_of_the_run() {
+    let scene = Scene::from_desc(builtin::cornell()).unwrap();
+    let solved = solve_scene(scene.clone(), &hierarchical(), &NoProgress).unwrap();
+    let st = &solved.transport.as_ref().unwrap().hierarchy().unwrap().stats;
+    let n = solved.mesh.len() as u64;
+    let rest = (radiosity::form_factor::hierarchical::PREDICTED_RUN_BYTES_PER_ELEMENT * n as f64) as u64;
+    assert!(
+        st.predicted_peak_bytes >= st.resident_before_bytes + st.memory_bytes + rest,
+        "predicted {} < held before {} + operator {} + rest {rest}",
+        st.predicted_peak_bytes,
+        st.resident_before_bytes,
+        st.memory_bytes
+    );
+    if cfg!(target_os = "linux") {
+        // The process holds at least its scene, mesh and rays when it predicts.
+        assert!(st.resident_before_bytes > 1 << 20, "held before: {}", st.resident_before_bytes);
+    }
+    // A limit below the prediction: refused, naming the parts.
+    let mut settings = hierarchical();
+    settings.form_factors.memory_limit = Some(1 << 20);
+    let Err(err) = solve_scene(scene.clone(), &settings, &NoProgress) else {
+        panic!("a limit of 1 MiB was not refused");
+    };
+    match &err {
+        Error::TooLarge { what, needed, limit, .. } => {
+            assert!(*needed > *limit && *limit == 1 << 20, "{err}");
+            assert!(what.contains("predicted peak") && what.contains("of links"), "{err}");
+        }
+        e => panic!("expected TooLarge, got {e}"),
+    }
+    // A limit above it: solved.
+    settings.form_factors.memory_limit = Some(st.predicted_peak_bytes.saturating_mul(4).max(1 << 34));
+    assert!(solve_scene(scene, &settings, &NoProgress).is_ok());
+}
+
 #[test]
 fn links_are_refined_under_a_shadow_boundary() {
     // A light above a floor with a plate between them: the floor's links to the light are

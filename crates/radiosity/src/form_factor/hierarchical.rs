@@ -322,6 +322,48 @@ pub fn predict_memory(tree: &Tree, min_size: f64, separation: f64, emitters: u64
     (links * (36.0 + 16.0) + elements * 2.0 * node + samples + direct) as u64
 }
 
+/// Bytes per element that a hierarchical run holds beside the links ([`predict_memory`]) and
+/// what it held before predicting (the scene, mesh, rays and tree): the receiver points of
+/// the coverage test (up to 14 points per element, each in its own allocation), the closure
+/// and exposure, the solver's vectors, the traced rows and the final gather's point
+/// locator, with the allocator's slack. The peak resident memory less those two came to
+/// 309 bytes per element on the conference room and 199 on Sponza (on the classroom, office2
+/// and the scaling series the links' prediction alone is above the peak); the conference
+/// room's peak has ranged over 1.80–1.99 GB from run to run, hence the margin
+/// (BENCHMARKS.md, "Peak memory, predicted").
+pub const PREDICTED_RUN_BYTES_PER_ELEMENT: f64 = 600.0;
+
+/// A hierarchical run's peak resident memory, predicted before the coverage test and the
+/// links ([`predict_peak`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PeakPrediction {
+    /// Resident already when predicting (the process's own measure where the system gives
+    /// one, [`crate::transport::resident_memory`]; else 0).
+    pub resident: u64,
+    /// The links, tree buffers, sample records and direct columns ([`predict_memory`]).
+    pub links: u64,
+    /// The rest of the run, [`PREDICTED_RUN_BYTES_PER_ELEMENT`] per element.
+    pub run: u64,
+}
+
+impl PeakPrediction {
+    /// The predicted peak.
+    pub fn total(&self) -> u64 {
+        self.resident.saturating_add(self.links).saturating_add(self.run)
+    }
+}
+
+/// The peak resident memory of a hierarchical run on `tree`: what the process holds now
+/// (`resident`), the links ([`predict_memory`]) and [`PREDICTED_RUN_BYTES_PER_ELEMENT`] per
+/// element for the rest. Checked against `--memory-limit` before the coverage test.
+pub fn predict_peak(tree: &Tree, min_size: f64, separation: f64, emitters: u64, resident: u64) -> PeakPrediction {
+    PeakPrediction {
+        resident,
+        links: predict_memory(tree, min_size, separation, emitters),
+        run: (PREDICTED_RUN_BYTES_PER_ELEMENT * tree.order.len() as f64) as u64,
+    }
+}
+
 /// Share of the area below which emitting elements count as concentrated
 /// (`Ctx::sharp`).
 const SHARP_EMITTERS: f64 = 0.25;

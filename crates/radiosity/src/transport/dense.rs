@@ -104,6 +104,15 @@ pub fn available_memory() -> Option<u64> {
     None
 }
 
+/// Resident memory of this process in bytes: `VmRSS` from `/proc/self/status` (Linux), None
+/// elsewhere or when it cannot be read. What a run holds already when it predicts its peak.
+pub fn resident_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/self/status").ok()?;
+    let rest = text.lines().find_map(|l| l.strip_prefix("VmRSS:"))?;
+    let kb: u64 = rest.trim().trim_end_matches("kB").trim().parse().ok()?;
+    Some(kb * 1024)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

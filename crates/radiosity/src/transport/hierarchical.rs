@@ -616,6 +616,11 @@ pub struct HierarchyStats {
     pub worst_row: Option<u64>,
     /// Bytes held by the tree and the links.
     pub memory_bytes: u64,
+    /// The run's peak resident memory as predicted before the coverage test and the links
+    /// ([`crate::form_factor::hierarchical::predict_peak`]; 0 where nothing predicted it).
+    pub predicted_peak_bytes: u64,
+    /// Of that, what the process held already when predicting.
+    pub resident_before_bytes: u64,
     /// Emitting elements whose light reaches every element through exact factors instead
     /// of links (0: emitters are sources in the hierarchy).
     pub direct_emitters: u64,

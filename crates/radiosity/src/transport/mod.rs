@@ -12,7 +12,7 @@ mod dense;
 pub mod hierarchical;
 mod sparse;
 
-pub use dense::{available_memory, DenseMatrix};
+pub use dense::{available_memory, resident_memory, DenseMatrix};
 pub use hierarchical::Hierarchy;
 pub use sparse::SparseRows;
 
