@@ -83,7 +83,8 @@ pub struct SolveFlags {
     /// Memory the run may use (e.g. 8G, 512M): refused before any work when the prediction
     /// is above it. Form-factor rows: their own size. Hierarchical transport: the whole
     /// run's peak resident memory (what the process holds after loading and meshing, the
-    /// links, and the rest of the run per element) [default: the memory available].
+    /// links, and the rest of the run per element), and watched again while the links are
+    /// refined [default: the memory available].
     #[arg(long, value_name = "SIZE")]
     pub memory_limit: Option<String>,
     /// Solver: direct, jacobi, gauss-seidel, shooting, progressive, stochastic-jacobi,

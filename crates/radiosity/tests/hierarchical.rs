@@ -54,6 +54,62 @@ fn furnace_errors(solved: &radiosity::pipeline::Solved, exact: f64) -> (Vec<f64>
     (errs, over, worst)
 }
 
+/// A two-sided floor of 4 × 4 unit patches with open boxes standing on them (chairs), lit
+/// by a lamp above, at a link minimum size that stops links at clusters of a patch and its
+/// box. Light leaving the floor's front reaches nothing of the floor's back copies (they
+/// lie in its plane and face away), but a link from a patch to a cluster holding the next
+/// patch, its back copy and a box arrives from below the box's centroid and lit the back
+/// copy by its normal, until the product took that back (`Exclusion`). Gathered through
+/// the operator from the floor's front alone, the back copies get (almost) nothing and the
+/// boxes get light.
+#[test]
+fn floor_back_copies_take_nothing_from_the_floor() {
+    let mut d = SceneDesc { name: "floor-chairs".into(), ..Default::default() };
+    d.materials.push(MaterialDesc { two_sided: Some(true), ..MaterialDesc::diffuse("grey", Rgb::splat(0.5)) });
+    d.materials.push(MaterialDesc { emission: Rgb::splat(5.0), two_sided: Some(false), ..MaterialDesc::diffuse("lamp", Rgb::ZERO) });
+    d.objects.push(ObjectDesc { name: "floor".into(), loc: None });
+    d.objects.push(ObjectDesc { name: "boxes".into(), loc: None });
+    d.objects.push(ObjectDesc { name: "lamp".into(), loc: None });
+    let quad = |p: [DVec3; 4], material: u32, object: u32| PolygonDesc { uvs: Vec::new(), vertices: p.to_vec(), material, object, loc: None };
+    for i in 0..4 {
+        for k in 0..4 {
+            let (x, z) = (i as f64, k as f64);
+            d.polygons.push(quad([v(x, 0., z), v(x, 0., z + 1.), v(x + 1., 0., z + 1.), v(x + 1., 0., z)], 0, 0));
+            // A box 0.4 wide, 0.5 high, open below, on every patch.
+            let (lo, hi, h) = (0.3, 0.7, 0.5);
+            for f in box_faces(v(x + lo, 0., z + lo), v(x + hi, h, z + hi), false) {
+                if f.iter().all(|p| p.y == 0.0) {
+                    continue;
+                }
+                d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: f, material: 0, object: 1, loc: None });
+            }
+        }
+    }
+    d.polygons.push(quad([v(1.5, 3., 1.5), v(2.5, 3., 1.5), v(2.5, 3., 2.5), v(1.5, 3., 2.5)], 1, 2));
+    let scene = Scene::from_desc(d).unwrap();
+    let mut settings = hierarchical();
+    settings.mesh_size = Some(0.25);
+    settings.links.min_size = Some(1.5);
+    let solved = solve_scene(scene, &settings, &NoProgress).unwrap();
+    let floor = |e: usize| {
+        let p = &solved.scene.polygons[solved.mesh.elements[e].patch as usize];
+        (p.object == 0, p.back_side)
+    };
+    let n = solved.mesh.len();
+    let x: Vec<Rgb> = (0..n).map(|e| if floor(e) == (true, false) { Rgb::ONE } else { Rgb::ZERO }).collect();
+    let mut y = vec![Rgb::ZERO; n];
+    solved.transport.as_ref().unwrap().gather(&x, &mut y);
+    let backs: Vec<usize> = (0..n).filter(|&e| floor(e) == (true, true)).collect();
+    let worst = backs.iter().map(|&e| y[e].max_element()).fold(0.0, f64::max);
+    let boxes = (0..n).filter(|&e| solved.scene.polygons[solved.mesh.elements[e].patch as usize].object == 1).map(|e| y[e].max_element()).fold(0.0, f64::max);
+    let h = solved.transport.as_ref().unwrap().hierarchy().unwrap();
+    assert!(!backs.is_empty() && boxes > 0.05, "boxes gather {boxes} of the floor's light");
+    // Measured 2026-12-06: 1.9e-4 against 0.79 on the boxes (faces under the 1 % share and
+    // receivers of more than 16 faces keep a little); 0.19 without the exclusions, and with
+    // surface sources alone.
+    assert!(worst <= 1e-3, "a back copy of the floor gathers {worst} of the floor's front ({} exclusions)", h.exclusions().len());
+}
+
 #[test]
 fn push_pull_conserves_the_power_the_links_carry() {
     for cluster_receivers in [false, true] {
@@ -1328,6 +1384,14 @@ fn link_truth() {
                 break;
             }
             k = *nd.child.iter().find(|&&c| tree.contains(c, leaf)).unwrap();
+        }
+        // What the product takes back from faces behind a link's surface source.
+        for ex in h.exclusions().iter().filter(|ex| tree.contains(ex.c, leaf)) {
+            if let Some(l) = links.iter_mut().find(|l| l.0 == ex.s) {
+                let src = read(ex.s, Link::MEAN);
+                l.1 -= ex.coef as f64 * src;
+                l.3 -= ex.coef as f64;
+            }
         }
         let scale = h.link_scale()[i] as f64;
         let (mut mc, mut miss, mut emitted) = (0.0, 0.0, 0.0);

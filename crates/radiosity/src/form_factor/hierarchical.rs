@@ -112,7 +112,7 @@ use super::emitter_tree::EmitterTree;
 use crate::geom::{self, kernel::point_to_polygon};
 use crate::mesh::{Mesh, Receivers};
 use crate::sampling::{rng_for, stratified, Rng};
-use crate::transport::hierarchical::{Closure, Hierarchy, HierarchyStats, Link, Node, Tree};
+use crate::transport::hierarchical::{Closure, Exclusion, Hierarchy, HierarchyStats, Link, Node, Tree, NONE};
 use crate::{Error, Progress, Result, Rgb};
 
 /// Link refinement settings.
@@ -326,12 +326,13 @@ pub fn predict_memory(tree: &Tree, min_size: f64, separation: f64, emitters: u64
 /// what it held before predicting (the scene, mesh, rays and tree): the receiver points of
 /// the coverage test (up to 14 points per element, each in its own allocation), the closure
 /// and exposure, the solver's vectors, the traced rows and the final gather's point
-/// locator, with the allocator's slack. The peak resident memory less those two came to
-/// 309 bytes per element on the conference room and 199 on Sponza (on the classroom, office2
-/// and the scaling series the links' prediction alone is above the peak); the conference
-/// room's peak has ranged over 1.80–1.99 GB from run to run, hence the margin
-/// (BENCHMARKS.md, "Peak memory, predicted").
-pub const PREDICTED_RUN_BYTES_PER_ELEMENT: f64 = 600.0;
+/// locator and the exclusions ([`crate::transport::hierarchical::Exclusion`]), with the
+/// allocator's slack. The peak resident memory less those two came to 309 bytes per element
+/// on the conference room and up to 1 130 on Sponza, whose links outnumber the links'
+/// prediction (897 per link node against 400); on the classroom, office2 and the scaling
+/// series the links' prediction alone is above the peak. Sponza's peak ranged over
+/// 0.84–0.97 GB from run to run (BENCHMARKS.md, "Sixteenth round", "Seventeenth round").
+pub const PREDICTED_RUN_BYTES_PER_ELEMENT: f64 = 1200.0;
 
 /// A hierarchical run's peak resident memory, predicted before the coverage test and the
 /// links ([`predict_peak`]).
@@ -402,6 +403,17 @@ const NEAR_BUDGET: usize = 16;
 /// classroom chair's links from the floor at minimum size 0.8: 64 % below Monte Carlo
 /// gathering; 4 % with the choice made before any ray).
 const QUICK_TERMINAL_SHARE: usize = 4;
+
+/// Nodes [`Ctx::faces_behind`] visits at most for one link.
+const BEHIND_VISITS: usize = 256;
+
+/// Topmost faces of a cluster receiver above which [`Ctx::faces_behind`] does not examine
+/// a terminal link from a cluster source.
+const BEHIND_CLUSTER_FACES: usize = 16;
+
+/// The share of a cluster receiver's link, handed out by normal, above which a face behind
+/// the link's surface source is excluded from it ([`Ctx::behind_shares`]).
+const BEHIND_SHARE: f64 = 0.01;
 
 /// Source frontier size (far-field summary of a source node).
 const SOURCE_FRONTIER: usize = 8;
@@ -617,23 +629,46 @@ pub fn link(
         }
     }
     roots.sort_unstable();
+    // The run's memory limit, watched while the links grow (the peak checked before the
+    // work is a prediction): before each task, the process's resident memory against the
+    // limit, or by default against what was free beside what it held when the links began.
+    let limit = ff.memory_limit.or_else(|| {
+        crate::transport::available_memory().map(|a| a.saturating_add(crate::transport::resident_memory().unwrap_or(0)))
+    });
+    let over = AtomicU64::new(0);
     progress.begin("links", roots.len() as u64);
-    let results: Vec<(Vec<Link>, Counts)> = roots
+    let results: Vec<(Vec<Link>, Vec<Exclusion>, Counts)> = roots
         .par_iter()
         .map(|&r| {
             if stopped.load(Ordering::Relaxed) || progress.should_stop() {
                 stopped.store(true, Ordering::Relaxed);
-                return (Vec::new(), Counts::default());
+                return (Vec::new(), Vec::new(), Counts::default());
             }
-            let mut links = Vec::new();
+            if let (Some(l), Some(held)) = (limit, crate::transport::resident_memory()) {
+                if held > l {
+                    over.fetch_max(held, Ordering::Relaxed);
+                    stopped.store(true, Ordering::Relaxed);
+                    return (Vec::new(), Vec::new(), Counts::default());
+                }
+            }
+            let (mut links, mut exclusions) = (Vec::new(), Vec::new());
             let mut counts = Counts::default();
-            ctx.refine_root(r, &mut links, &mut counts);
+            ctx.refine_root(r, &mut links, &mut exclusions, &mut counts);
             total_rays.fetch_add(counts.rays, Ordering::Relaxed);
             progress.advance(1);
-            (links, counts)
+            (links, exclusions, counts)
         })
         .collect();
     progress.end();
+    let held = over.load(Ordering::Relaxed);
+    if held > 0 {
+        return Err(Error::TooLarge {
+            what: format!("the hierarchical links of {n} elements (the process's resident memory passed the limit while they were refined)"),
+            needed: held,
+            limit: limit.unwrap_or(0),
+            hint: "use a larger --mesh-size, --link-min-size or --link-separation, or raise --memory-limit".into(),
+        });
+    }
     if stopped.load(Ordering::Relaxed) {
         return Err(Error::Cancelled);
     }
@@ -668,8 +703,10 @@ pub fn link(
         ..Default::default()
     };
     let mut parts = Vec::with_capacity(results.len());
-    for (l, c) in results {
+    let mut exclusions = Vec::new();
+    for (l, mut ex, c) in results {
         parts.push(l);
+        exclusions.append(&mut ex);
         stats.pairs_examined += c.pairs;
         stats.partial_refined += c.partial;
         stats.terminal_links += c.terminal;
@@ -683,7 +720,7 @@ pub fn link(
     // Its own stage in the report: seconds on a large scene (the links into one array, the
     // closure fit and the row guard, each a pass over every link).
     progress.begin("link assembly", 1);
-    let mut h = Hierarchy::from_parts(tree, parts, direct_rows, closure, stats);
+    let mut h = Hierarchy::from_parts(tree, parts, exclusions, direct_rows, closure, stats);
     progress.end();
     if let Some(fraction) = h.closure().map(|c| &c.fraction).filter(|_| traced) {
         // Elements whose rows fall far short of their closure gather by rays instead.
@@ -956,7 +993,7 @@ impl Ctx<'_> {
         self.tree.projected_area(k, d, !near)
     }
 
-    fn refine_root(&self, root: u32, links: &mut Vec<Link>, c: &mut Counts) {
+    fn refine_root(&self, root: u32, links: &mut Vec<Link>, exclusions: &mut Vec<Exclusion>, c: &mut Counts) {
         let mut rng = rng_for(self.ff.seed ^ 0x4849_4552, root as u64);
         let mut stack = vec![(root, 0u32)];
         let mut scratch = Scratch::default();
@@ -1071,6 +1108,101 @@ impl Ctx<'_> {
             } else {
                 stack.push((nr.child[0], s));
                 stack.push((nr.child[1], s));
+            }
+        }
+        exclusions.append(&mut scratch.exclusions);
+    }
+
+    /// The topmost surface nodes below cluster `r` that see nothing of `s`, into
+    /// `sc.behind`. For a surface `s`: among those not wholly in front of `s`'s plane, the
+    /// ones wholly in it or behind it that do not face the way `s` does, and the ones whose
+    /// own plane has all of `s` in it or behind it; at most [`BEHIND_VISITS`] nodes are
+    /// visited (a large cluster keeps the rest lit). For a cluster `s` (terminal links
+    /// only): the ones whose own plane has all of `s` in it or behind it, when `r` has at
+    /// most [`BEHIND_CLUSTER_FACES`] topmost faces (every receiver made Sponza's links 30 %
+    /// slower; BENCHMARKS.md, "Seventeenth round"). A link from `s` to `r` would light them
+    /// by their normals alone ([`Exclusion`]).
+    fn faces_behind(&self, r: u32, s: u32, tol: f64, sc: &mut Scratch) {
+        sc.behind.clear();
+        let ns = self.node(s);
+        if !ns.surface {
+            // A cluster: R's topmost faces, with S wholly in their plane or behind it;
+            // only for a receiver of at most BEHIND_CLUSTER_FACES faces.
+            let [a, b] = self.tree.top_range[r as usize];
+            if (b - a) as usize <= BEHIND_CLUSTER_FACES {
+                sc.behind.extend(self.tree.top_id[a as usize..b as usize].iter().copied().filter(|&q| {
+                    let nq = self.node(q);
+                    nq.area > 0.0 && box_plane_range(ns, nq.centroid.as_dvec3(), nq.normal()).1 <= tol
+                }));
+            }
+            return;
+        }
+        let (p, n) = (ns.centroid.as_dvec3(), ns.normal());
+        if box_plane_range(self.node(r), p, n).0 > tol {
+            return; // wholly in front
+        }
+        let mut walk = std::mem::take(&mut sc.behind_walk);
+        walk.clear();
+        walk.push(r);
+        let mut visits = 0;
+        while let Some(q) = walk.pop() {
+            visits += 1;
+            if visits > BEHIND_VISITS {
+                break;
+            }
+            let nq = self.node(q);
+            if !(nq.area > 0.0) {
+                continue;
+            }
+            let (a, b) = box_plane_range(nq, p, n);
+            if a > tol {
+                continue; // wholly in front of S
+            }
+            if nq.surface {
+                // Wholly in S's plane or behind it, or S wholly in its plane or behind it.
+                let behind_s = b <= tol && nq.normal().dot(n) < 0.999;
+                if behind_s || box_plane_range(ns, nq.centroid.as_dvec3(), nq.normal()).1 <= tol {
+                    sc.behind.push(q);
+                }
+                continue;
+            }
+            walk.extend(nq.child.into_iter().filter(|&c| c != NONE));
+        }
+        sc.behind_walk = walk;
+    }
+
+    /// For a link from the surface `s` to cluster `r` arriving from `d`: keeps in
+    /// `sc.behind` the faces of `r` behind `s` ([`Ctx::faces_behind`]) that would take at
+    /// least [`BEHIND_SHARE`] of what the link hands out, and returns the sum of their
+    /// front areas (`Tree::front_area`, their share of the link's spread). Smaller ones stay
+    /// lit: on Sponza, two-sided throughout, recording every one took more memory than the
+    /// links.
+    fn behind_shares(&self, r: u32, s: u32, tol: f64, d: DVec3, near: bool, sc: &mut Scratch) -> f64 {
+        self.faces_behind(r, s, tol, sc);
+        if sc.behind.is_empty() {
+            return 0.0;
+        }
+        let floor = BEHIND_SHARE * self.tree.front_area(r, d, !near);
+        let mut sum = 0.0;
+        sc.behind.retain(|&q| {
+            let share = self.tree.front_area(q, d, !near);
+            let keep = share > 0.0 && share >= floor;
+            if keep {
+                sum += share;
+            }
+            keep
+        });
+        sum
+    }
+
+    /// Records the faces in `sc.behind` ([`Ctx::behind_shares`]) as exclusions of a link of
+    /// factor `w` from `s` arriving from `d`: what the walk would hand each of them.
+    fn exclude_behind(&self, s: u32, w: f64, d: DVec3, near: bool, dir: [f32; 4], sc: &mut Scratch) {
+        for &q in &sc.behind {
+            let share = self.tree.front_area(q, d, !near);
+            let a = self.node(q).area as f64;
+            if share > 0.0 && a > 0.0 {
+                sc.exclusions.push(Exclusion { c: q, s, coef: (w * share / a) as f32, dir, near });
             }
         }
     }
@@ -1354,11 +1486,13 @@ impl Ctx<'_> {
             let near = self.near(r, s);
             let (f, d) = self.terminal_factor(r, s, near, minor, rng, c, sc);
             if f > 0.0 && d != DVec3::ZERO {
-                let spread = self.tree.front_area(r, d, !near);
+                // R's faces behind a surface source take none of it: the rest share it.
+                let spread = self.tree.front_area(r, d, !near) - self.behind_shares(r, s, tol, d, near, sc);
                 if spread > 1e-6 * nr.area as f64 {
                     let read = if ns.surface { Link::MEAN } else { self.reading_towards(s, -d, near) };
-                    let w = f * nr.area as f64 / spread;
-                    links.push(Link { r, s, f: w.min(1.0) as f32, g: d.as_vec3().to_array(), dir: read, near });
+                    let w = (f * nr.area as f64 / spread).min(1.0);
+                    links.push(Link { r, s, f: w as f32, g: d.as_vec3().to_array(), dir: read, near });
+                    self.exclude_behind(s, w, d, near, read, sc);
                 }
             }
             return;
@@ -1400,7 +1534,12 @@ impl Ctx<'_> {
             if terminal || !partial {
                 if v > 0.0 {
                     let read = if ns.surface { Link::MEAN } else { self.reading_towards(s, -d, near) };
-                    links.push(Link { r, s, f: (kv * v).min(1.0) as f32, g: d.as_vec3().to_array(), dir: read, near });
+                    let w = (kv * v).min(1.0);
+                    links.push(Link { r, s, f: w as f32, g: d.as_vec3().to_array(), dir: read, near });
+                    if ns.surface {
+                        self.behind_shares(r, s, tol, d, near, sc);
+                        self.exclude_behind(s, w, d, near, read, sc);
+                    }
                 }
                 return;
             }
@@ -1823,6 +1962,12 @@ struct Scratch {
     receiver: Vec<DVec3>,
     /// Point pairs (position, normal, polygon) of [`Ctx::terminal_factor`].
     pairs: Vec<((DVec3, DVec3, u32), (DVec3, DVec3, u32))>,
+    /// Faces of a cluster receiver behind a surface source ([`Ctx::faces_behind`]) and the
+    /// walk that finds them.
+    behind: Vec<u32>,
+    behind_walk: Vec<u32>,
+    /// The task's exclusions so far.
+    exclusions: Vec<Exclusion>,
 }
 
 #[cfg(test)]
@@ -1837,14 +1982,31 @@ mod tests {
 
     /// [`pair`] with the link tolerance's power `power_eps`.
     fn pair_with(a: [DVec3; 4], b: [DVec3; 4], size: f64, power_eps: f64, test: impl FnOnce(&Ctx, u32, u32)) {
-        let mut d = SceneDesc { name: "pair".into(), ..Default::default() };
-        d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
-        for (k, v) in [a, b].into_iter().enumerate() {
+        let scene = quads(&[a, b], false);
+        ctx_for(&scene, size, power_eps, |ctx, mesh, tree| {
+            // The two polygons' nodes: the root's children (one plane each).
+            let [c0, c1] = tree.nodes[0].child;
+            let first_is_a = mesh.elements[tree.order[tree.nodes[c0 as usize].first as usize] as usize].patch == 0;
+            let (ra, rb) = if first_is_a { (c0, c1) } else { (c1, c0) };
+            test(ctx, ra, rb);
+        });
+    }
+
+    /// A scene of quadrilaterals, each its own object, grey ρ = 0.5 (two-sided or not).
+    fn quads(qs: &[[DVec3; 4]], two_sided: bool) -> Scene {
+        let mut d = SceneDesc { name: "quads".into(), ..Default::default() };
+        d.materials.push(MaterialDesc { two_sided: Some(two_sided), ..MaterialDesc::diffuse("grey", Rgb::splat(0.5)) });
+        for (k, v) in qs.iter().enumerate() {
             d.objects.push(ObjectDesc { name: format!("o{k}"), loc: None });
             d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: v.to_vec(), material: 0, object: k as u32, loc: None });
         }
-        let scene = Scene::from_desc(d).unwrap();
-        let mesh = crate::mesh::mesh_uniform(&scene, size);
+        Scene::from_desc(d).unwrap()
+    }
+
+    /// A link context over `scene` meshed at `size` (every element open, links down to the
+    /// elements), with the link tolerance's power `power_eps`.
+    fn ctx_for(scene: &Scene, size: f64, power_eps: f64, test: impl FnOnce(&Ctx, &Mesh, &Tree)) {
+        let mesh = crate::mesh::mesh_uniform(scene, size);
         let rays = SceneRays::new(&scene.polygons);
         let receivers = Receivers::all_open(&mesh);
         let tree = Tree::build(&mesh, &receivers.open_areas(&mesh));
@@ -1871,15 +2033,119 @@ mod tests {
             min_size: 0.0,
             reach: 0.0,
         };
-        // The two polygons' nodes: the root's children (one plane each).
-        let [c0, c1] = tree.nodes[0].child;
-        let first_is_a = mesh.elements[tree.order[tree.nodes[c0 as usize].first as usize] as usize].patch == 0;
-        let (ra, rb) = if first_is_a { (c0, c1) } else { (c1, c0) };
-        test(&ctx, ra, rb);
+        test(&ctx, &mesh, &tree);
+    }
+
+    /// A two-sided floor of two patches with an open box (no bottom) standing on the first:
+    /// among the faces that reach down to the second patch B's plane (faces wholly above
+    /// it are not examined for a surface source), those that see nothing of B are found,
+    /// and nothing else. They are the floor's back copies (wholly in B's plane, facing
+    /// away: a cluster link from B lit them by their normals), the floor's front (B in its
+    /// plane) and the box's sides turned from B (B behind their plane); not the sides that
+    /// face B.
+    #[test]
+    fn faces_that_see_nothing_of_a_floor_patch_are_found() {
+        let (y0, y1) = (0.0, 0.3);
+        let floor_a = [v(0.0, y0, 0.0), v(0.0, y0, 1.0), v(1.0, y0, 1.0), v(1.0, y0, 0.0)];
+        let floor_b = [v(1.0, y0, 0.0), v(1.0, y0, 1.0), v(2.0, y0, 1.0), v(2.0, y0, 0.0)];
+        let (lo, hi) = (0.35, 0.65);
+        let top = [v(lo, y1, lo), v(lo, y1, hi), v(hi, y1, hi), v(hi, y1, lo)];
+        let sides = [
+            [v(lo, y0, lo), v(hi, y0, lo), v(hi, y1, lo), v(lo, y1, lo)],
+            [v(hi, y0, lo), v(hi, y0, hi), v(hi, y1, hi), v(hi, y1, lo)],
+            [v(hi, y0, hi), v(lo, y0, hi), v(lo, y1, hi), v(hi, y1, hi)],
+            [v(lo, y0, hi), v(lo, y0, lo), v(lo, y1, lo), v(lo, y1, hi)],
+        ];
+        let mut qs = vec![floor_a, floor_b, top];
+        qs.extend(sides);
+        let scene = quads(&qs, true);
+        ctx_for(&scene, 0.25, 0.0, |ctx, mesh, tree| {
+            let is_floor = |e: u32| {
+                let p = &scene.polygons[mesh.elements[e as usize].patch as usize];
+                (p.object == 0 || p.object == 1, p.back_side, p.object == 1 && !p.back_side)
+            };
+            // The source: the topmost surface node holding floor B's front elements only.
+            let s = (0..tree.nodes.len() as u32)
+                .filter(|&k| {
+                    let nd = &tree.nodes[k as usize];
+                    nd.surface && (nd.first..nd.first + nd.count).all(|i| is_floor(tree.order[i as usize]).2)
+                })
+                .max_by_key(|&k| tree.nodes[k as usize].count)
+                .unwrap();
+            let mut sc = Scratch::default();
+            ctx.faces_behind(0, s, 1e-6, &mut sc);
+            let mut found: Vec<u32> = sc
+                .behind
+                .iter()
+                .flat_map(|&q| {
+                    let nd = &tree.nodes[q as usize];
+                    (nd.first..nd.first + nd.count).map(|i| tree.order[i as usize])
+                })
+                .collect();
+            found.sort_unstable();
+            // From the polygons' own vertices, among those not wholly in front of B's plane:
+            // wholly in it or behind it and not facing its way, or B wholly in their own
+            // plane or behind it.
+            let b_poly = scene.polygons.iter().find(|p| p.object == 1 && !p.back_side).unwrap();
+            let range = |n: DVec3, c: DVec3, pts: &[DVec3]| {
+                pts.iter().map(|p| n.dot(*p - c)).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| (lo.min(x), hi.max(x)))
+            };
+            let mut expected: Vec<u32> = (0..mesh.len() as u32)
+                .filter(|&e| {
+                    let p = &scene.polygons[mesh.elements[e as usize].patch as usize];
+                    let (lo, hi) = range(b_poly.normal, b_poly.vertices[0], &p.vertices);
+                    let behind_b = hi <= 1e-9 && p.normal.dot(b_poly.normal) < 0.999;
+                    lo <= 1e-9 && (behind_b || range(p.normal, p.vertices[0], &b_poly.vertices).1 <= 1e-9)
+                })
+                .collect();
+            expected.sort_unstable();
+            let backs = (0..mesh.len() as u32).filter(|&e| is_floor(e).0 && is_floor(e).1).count();
+            assert!(backs > 0 && (0..mesh.len() as u32).filter(|&e| is_floor(e).0 && is_floor(e).1).all(|e| expected.contains(&e)));
+            assert!(expected.len() < mesh.len() / 2 + backs, "{} of {}", expected.len(), mesh.len());
+            assert_eq!(found, expected, "faces behind floor B: {found:?}; expected: {expected:?}");
+        });
     }
 
     fn v(x: f64, y: f64, z: f64) -> DVec3 {
         DVec3::new(x, y, z)
+    }
+
+    /// The memory limit is watched while the links are refined (the check before the work
+    /// is only a prediction): a limit the process already holds more than stops the links
+    /// with an error naming it, where the system reports resident memory.
+    #[test]
+    fn links_stop_when_resident_memory_passes_the_limit() {
+        if crate::transport::resident_memory().is_none() {
+            eprintln!("skipping: this system does not report resident memory");
+            return;
+        }
+        let mut d = SceneDesc { name: "pair".into(), ..Default::default() };
+        d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
+        let floor = [v(0.0, 0.0, 0.0), v(0.0, 0.0, 1.0), v(1.0, 0.0, 1.0), v(1.0, 0.0, 0.0)];
+        let roof = [v(0.0, 1.0, 0.0), v(1.0, 1.0, 0.0), v(1.0, 1.0, 1.0), v(0.0, 1.0, 1.0)];
+        for (k, q) in [floor, roof].into_iter().enumerate() {
+            d.objects.push(ObjectDesc { name: format!("o{k}"), loc: None });
+            d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: q.to_vec(), material: 0, object: k as u32, loc: None });
+        }
+        let scene = Scene::from_desc(d).unwrap();
+        let mesh = crate::mesh::mesh_uniform(&scene, 0.25);
+        let rays = SceneRays::new(&scene.polygons);
+        let receivers = Receivers::all_open(&mesh);
+        let run = |limit: u64| {
+            let tree = Tree::build(&mesh, &receivers.open_areas(&mesh));
+            let ff = super::super::Options { memory_limit: Some(limit), ..Default::default() };
+            let (rho, em) = (vec![Rgb::splat(0.5); mesh.len()], vec![Rgb::ONE; mesh.len()]);
+            link(&mesh, &rays, &receivers, tree, &rho, &em, &ff, &Options::default(), &crate::NoProgress)
+        };
+        match run(1 << 20) {
+            Err(Error::TooLarge { what, needed, limit, .. }) => {
+                assert!(needed > limit && limit == 1 << 20 && what.contains("while they were refined"), "{what}");
+            }
+            Err(e) => panic!("expected TooLarge, got {e}"),
+            Ok(_) => panic!("a limit of 1 MiB did not stop the links"),
+        }
+        let (h, _) = run(u64::MAX).expect("no limit: linked");
+        assert!(h.stats.links > 0);
     }
 
     #[test]

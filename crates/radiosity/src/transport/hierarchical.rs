@@ -151,6 +151,8 @@ pub struct Tree {
     pub top_nx: Vec<Vec3>,
     /// Per node: its run of topmost surface nodes.
     pub top_range: Vec<[u32; 2]>,
+    /// The topmost surface nodes themselves, in the same runs.
+    pub top_id: Vec<u32>,
 }
 
 /// Elements of one plane share a key: normal and offset quantised.
@@ -423,7 +425,7 @@ impl Tree {
     /// in tree order (depth first, first child first, so every node's lie in one run).
     fn index_surfaces(&mut self) {
         let nodes = &self.nodes;
-        let (mut top_n, mut top_nx) = (Vec::new(), Vec::new());
+        let (mut top_n, mut top_nx, mut top_id) = (Vec::new(), Vec::new(), Vec::new());
         let mut range = vec![[0u32; 2]; nodes.len()];
         let mut stack = if nodes.is_empty() { Vec::new() } else { vec![0u32] };
         while let Some(k) = stack.pop() {
@@ -433,6 +435,7 @@ impl Tree {
                 range[k as usize] = [i, i + 1];
                 top_n.push(nd.n_sum);
                 top_nx.push(nd.n_x);
+                top_id.push(k);
             } else {
                 stack.extend(nd.child.iter().rev().filter(|&&c| c != NONE));
             }
@@ -454,6 +457,7 @@ impl Tree {
         }
         self.top_n = top_n;
         self.top_nx = top_nx;
+        self.top_id = top_id;
         self.top_range = range;
     }
 
@@ -691,6 +695,28 @@ pub const CLOSED_PRIOR: f64 = 0.1;
 /// beyond it the links are too far off for one factor to mend, and are left to the guard.
 pub const CLOSURE_SCALE: (f64, f64) = (0.5, 2.0);
 
+/// A face that a cluster receiver's link must not light: the topmost surface node `c` below
+/// the link's receiver lies wholly in the plane of the link's surface source `s` or behind
+/// it, or `s` (a surface or a cluster) lies wholly in `c`'s plane or behind it, so it sees
+/// nothing of `s`, but the walk down the cluster would hand it `coef` times the link's
+/// reading of `s` by its normal alone (see [`DIR_BIN_SIDE`]); the product takes that back.
+/// The back copy of a two-sided floor under the chairs on it, lit through their cluster by
+/// the next floor patch, is the case (BENCHMARKS.md, "Seventeenth round").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Exclusion {
+    /// The face (a topmost surface node).
+    pub c: u32,
+    /// The link's source.
+    pub s: u32,
+    /// What the walk hands the face per unit of the source's reading: the link's factor
+    /// times `max(0, n_c·d)`, times the face's exposure for a far link.
+    pub coef: f32,
+    /// How the link reads its source ([`Link::dir`]).
+    pub dir: [f32; 4],
+    /// Whether the link is a near one ([`Link::near`]).
+    pub near: bool,
+}
+
 /// One link: receiver node `r` gathers `f · B̄_s`, plus `g · (x − c_r)` at a point `x` of
 /// it (`c_r` its centroid): the factor's first-order change across a large receiver.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -777,6 +803,8 @@ pub struct Hierarchy {
     /// Ray-traced rows of the elements that the links serve badly (see
     /// [`Hierarchy::set_ray_rows`]): their links are switched off.
     ray_rows: Option<SparseRows>,
+    /// Faces that cluster receivers' links must not light ([`Exclusion`]).
+    exclusions: Vec<Exclusion>,
     /// What it holds.
     pub stats: HierarchyStats,
     /// A product's per-node buffers, kept for the next one ([`Buffers`]).
@@ -839,10 +867,11 @@ impl Hierarchy {
     /// Assembles the operator from the tree and links (any order), measures every leaf's
     /// row sum over its own and its ancestors' links and scales rows above one to one.
     pub fn new(tree: Tree, links: Vec<Link>, stats: HierarchyStats) -> Hierarchy {
-        Hierarchy::from_parts(tree, vec![links], None, None, stats)
+        Hierarchy::from_parts(tree, vec![links], Vec::new(), None, None, stats)
     }
 
-    /// As [`Hierarchy::new`] from several lists of links (one per refinement task), each
+    /// As [`Hierarchy::new`] from several lists of links (one per refinement task), and the
+    /// faces their cluster receivers must not light (`exclusions`), each list
     /// dropped as soon as it is stored: links are placed by a counting sort on the receiver,
     /// so the peak is the stored links plus one task's list, not three copies of all.
     /// `direct` holds the factors to the emitting elements when emitted light does not go
@@ -858,6 +887,7 @@ impl Hierarchy {
     pub fn from_parts(
         tree: Tree,
         mut parts: Vec<Vec<Link>>,
+        exclusions: Vec<Exclusion>,
         direct: Option<SparseRows>,
         closure: Option<Closure>,
         mut stats: HierarchyStats,
@@ -938,6 +968,7 @@ impl Hierarchy {
             fixed_scale: vec![1.0; n],
             direct,
             ray_rows: None,
+            exclusions,
             stats,
             buffers: BufferCell::default(),
         };
@@ -1216,6 +1247,12 @@ impl Hierarchy {
             for (c, v) in lit {
                 g[c as usize].0 += v;
             }
+            // What the walk handed to faces that see nothing of a link's source.
+            for ex in &self.exclusions {
+                let v = self.read_source(ex.s as usize, ex.dir, ex.near, &src);
+                let gc = &mut g[ex.c as usize].0;
+                *gc = (*gc - v * ex.coef as f64).max(Rgb::ZERO);
+            }
         }
         // Push: every ancestor's irradiance, evaluated at the child's centroid, top-down
         // (clusters have handed theirs to their surface children above).
@@ -1413,14 +1450,19 @@ impl Hierarchy {
     /// cluster its directional reading ([`Link::directional`]).
     #[inline]
     fn source_value(&self, k: usize, t: usize, src: &Sources) -> Rgb {
-        let s = self.link_src[t] as usize;
-        let dir = self.read_of(k, t);
+        self.read_source(self.link_src[t] as usize, self.read_of(k, t), self.is_near(t), src)
+    }
+
+    /// Source `s` read as `dir` says ([`Link::MEAN`] or [`Link::directional`]), over all its
+    /// faces (`near`) or its exposed ones.
+    #[inline]
+    fn read_source(&self, s: usize, dir: [f32; 4], near: bool, src: &Sources) -> Rgb {
         let hi = src.hi;
         if dir == Link::MEAN {
             src.mean[s]
         } else {
             let ax = self.tree.nodes[s].area_x as f64;
-            let (mean, nb) = if self.is_near(t) || !(ax > 0.0) {
+            let (mean, nb) = if near || !(ax > 0.0) {
                 (src.mean[s], src.nb)
             } else {
                 (src.sx[s] / ax, src.nbx)
@@ -1436,6 +1478,38 @@ impl Hierarchy {
         }
     }
 
+    /// Source `s` read as `dir` says for radiosity `x`, from its leaves directly (no pull):
+    /// what [`Hierarchy::read_source`] gives after the pull.
+    fn leaf_reading(&self, x: &[Rgb], s: usize, dir: [f32; 4], near: bool) -> Rgb {
+        let nodes = &self.tree.nodes;
+        let s = &nodes[s];
+        let (mut sum, mut sum_x, mut nb, mut nbx, mut hi) = (Rgb::ZERO, Rgb::ZERO, [DVec3::ZERO; 3], [DVec3::ZERO; 3], Rgb::ZERO);
+        for slot in s.first..s.first + s.count {
+            let e = self.tree.order[slot as usize] as usize;
+            let leaf = &nodes[self.tree.leaf_of[e] as usize];
+            let v = x[e];
+            hi = hi.max(v);
+            sum += v * leaf.area as f64;
+            sum_x += v * leaf.area_x as f64;
+            let n = leaf.n_sum.as_dvec3();
+            nb = [nb[0] + n * v.x, nb[1] + n * v.y, nb[2] + n * v.z];
+            let n = leaf.n_x.as_dvec3();
+            nbx = [nbx[0] + n * v.x, nbx[1] + n * v.y, nbx[2] + n * v.z];
+        }
+        let mean = if s.area > 0.0 { sum / s.area as f64 } else { Rgb::ZERO };
+        if dir == Link::MEAN {
+            return mean;
+        }
+        let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
+        let (mean, nb) = if near || !(s.area_x > 0.0) { (mean, nb) } else { (sum_x / s.area_x as f64, nbx) };
+        (mean * dir[0] as f64 + Rgb::new(beta.dot(nb[0]), beta.dot(nb[1]), beta.dot(nb[2]))).max(Rgb::ZERO).min(hi)
+    }
+
+    /// The faces that cluster receivers' links must not light ([`Exclusion`]).
+    pub fn exclusions(&self) -> &[Exclusion] {
+        &self.exclusions
+    }
+
     /// The power the links carry for radiosity `x`, `Σ_links A_R · f · B̃_S` (luminance of
     /// RGB; for a cluster receiver each leaf's share by its normal, see [`DIR_BIN_SIDE`]),
     /// summed link by link without the push: what the leaves must receive in all (the
@@ -1447,33 +1521,7 @@ impl Hierarchy {
         for k in 0..nodes.len() {
             let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
             for t in a..b {
-                let s = &nodes[self.link_src[t] as usize];
-                // The source's value from its leaves directly (no pull).
-                let (mut sum, mut sum_x, mut nb, mut nbx, mut hi) =
-                    (Rgb::ZERO, Rgb::ZERO, [DVec3::ZERO; 3], [DVec3::ZERO; 3], Rgb::ZERO);
-                for slot in s.first..s.first + s.count {
-                    let e = self.tree.order[slot as usize] as usize;
-                    let leaf = &nodes[self.tree.leaf_of[e] as usize];
-                    let v = x[e];
-                    hi = hi.max(v);
-                    sum += v * leaf.area as f64;
-                    sum_x += v * leaf.area_x as f64;
-                    let n = leaf.n_sum.as_dvec3();
-                    nb = [nb[0] + n * v.x, nb[1] + n * v.y, nb[2] + n * v.z];
-                    let n = leaf.n_x.as_dvec3();
-                    nbx = [nbx[0] + n * v.x, nbx[1] + n * v.y, nbx[2] + n * v.z];
-                }
-                let mean = if s.area > 0.0 { sum / s.area as f64 } else { Rgb::ZERO };
-                let dir = self.read_of(k, t);
-                let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
-                let src = if dir == Link::MEAN {
-                    mean
-                } else {
-                    let (mean, nb) = if self.is_near(t) || !(s.area_x > 0.0) { (mean, nb) } else { (sum_x / s.area_x as f64, nbx) };
-                    (mean * dir[0] as f64 + Rgb::new(beta.dot(nb[0]), beta.dot(nb[1]), beta.dot(nb[2])))
-                        .max(Rgb::ZERO)
-                        .min(hi)
-                };
+                let src = self.leaf_reading(x, self.link_src[t] as usize, self.read_of(k, t), self.is_near(t));
                 let w = self.factor(t) * crate::luminance(src);
                 if nodes[k].surface {
                     total += nodes[k].area as f64 * w;
@@ -1483,6 +1531,10 @@ impl Hierarchy {
                     total += w * self.tree.front_area(k as u32, d, !self.is_near(t));
                 }
             }
+        }
+        for ex in &self.exclusions {
+            let src = self.leaf_reading(x, ex.s as usize, ex.dir, ex.near);
+            total -= ex.coef as f64 * crate::luminance(src) * nodes[ex.c as usize].area as f64;
         }
         total
     }
@@ -1551,6 +1603,7 @@ impl Transport for Hierarchy {
             + t.normal_start.len() * 4
             + (t.normal_bins.len() + t.normal_bins_exposed.len() + t.top_n.len() + t.top_nx.len()) * 12
             + t.top_range.len() * 8
+            + t.top_id.len() * 4
             + self.link_start.len() * 4
             + self.link_src.len() * 4
             + self.link_f.len() * 4
@@ -1558,6 +1611,7 @@ impl Transport for Hierarchy {
             + self.link_dir.len() * 16
             + (self.g_base.len() + self.dir_base.len() + self.cluster_count.len()) * 4
             + (self.scale.len() + self.fixed_scale.len() + self.link_scale.len()) * 4
+            + self.exclusions.len() * std::mem::size_of::<Exclusion>()
             + self.closure.as_ref().map_or(0, |c| (c.fraction.len() + c.group.len()) * 4)
             + self.direct.as_ref().map_or(0, |d| d.nnz() * 8 + (d.n() + 1) * 8)
             + self.ray_rows.as_ref().map_or(0, |d| d.nnz() * 8 + (d.n() + 1) * 8)
