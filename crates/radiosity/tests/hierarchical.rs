@@ -1385,10 +1385,11 @@ fn link_truth() {
             }
             k = *nd.child.iter().find(|&&c| tree.contains(c, leaf)).unwrap();
         }
-        // What the product takes back from faces behind a link's surface source.
+        // What the product takes back from faces that see nothing of a link's source
+        // (surface or cluster, read as the link reads it).
         for ex in h.exclusions().iter().filter(|ex| tree.contains(ex.c, leaf)) {
             if let Some(l) = links.iter_mut().find(|l| l.0 == ex.s) {
-                let src = read(ex.s, Link::MEAN);
+                let src = read(ex.s, ex.dir);
                 l.1 -= ex.coef as f64 * src;
                 l.3 -= ex.coef as f64;
             }

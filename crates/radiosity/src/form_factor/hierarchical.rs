@@ -404,6 +404,10 @@ const NEAR_BUDGET: usize = 16;
 /// gathering; 4 % with the choice made before any ray).
 const QUICK_TERMINAL_SHARE: usize = 4;
 
+/// Without an explicit memory limit, the links stop when the system's available memory
+/// falls below this (bytes) while they are refined.
+const MEMORY_FLOOR: u64 = 256 << 20;
+
 /// Nodes [`Ctx::faces_behind`] visits at most for one link.
 const BEHIND_VISITS: usize = 256;
 
@@ -630,11 +634,10 @@ pub fn link(
     }
     roots.sort_unstable();
     // The run's memory limit, watched while the links grow (the peak checked before the
-    // work is a prediction): before each task, the process's resident memory against the
-    // limit, or by default against what was free beside what it held when the links began.
-    let limit = ff.memory_limit.or_else(|| {
-        crate::transport::available_memory().map(|a| a.saturating_add(crate::transport::resident_memory().unwrap_or(0)))
-    });
+    // work is a prediction): before each task, the process's resident memory against an
+    // explicit limit; without one, the system's available memory against
+    // [`MEMORY_FLOOR`] (re-read each time: other work may free or take memory meanwhile).
+    let limit = ff.memory_limit;
     let over = AtomicU64::new(0);
     progress.begin("links", roots.len() as u64);
     let results: Vec<(Vec<Link>, Vec<Exclusion>, Counts)> = roots
@@ -644,12 +647,16 @@ pub fn link(
                 stopped.store(true, Ordering::Relaxed);
                 return (Vec::new(), Vec::new(), Counts::default());
             }
-            if let (Some(l), Some(held)) = (limit, crate::transport::resident_memory()) {
-                if held > l {
-                    over.fetch_max(held, Ordering::Relaxed);
-                    stopped.store(true, Ordering::Relaxed);
-                    return (Vec::new(), Vec::new(), Counts::default());
-                }
+            let exceeded = match limit {
+                Some(l) => crate::transport::resident_memory().filter(|&held| held > l),
+                None => crate::transport::available_memory()
+                    .filter(|&a| a < MEMORY_FLOOR)
+                    .map(|_| crate::transport::resident_memory().unwrap_or(1)),
+            };
+            if let Some(held) = exceeded {
+                over.fetch_max(held.max(1), Ordering::Relaxed);
+                stopped.store(true, Ordering::Relaxed);
+                return (Vec::new(), Vec::new(), Counts::default());
             }
             let (mut links, mut exclusions) = (Vec::new(), Vec::new());
             let mut counts = Counts::default();
@@ -663,9 +670,15 @@ pub fn link(
     let held = over.load(Ordering::Relaxed);
     if held > 0 {
         return Err(Error::TooLarge {
-            what: format!("the hierarchical links of {n} elements (the process's resident memory passed the limit while they were refined)"),
+            what: match limit {
+                Some(_) => format!("the hierarchical links of {n} elements (the process's resident memory passed the limit while they were refined)"),
+                None => format!(
+                    "the hierarchical links of {n} elements (the system's available memory fell below {} MiB while they were refined)",
+                    MEMORY_FLOOR >> 20
+                ),
+            },
             needed: held,
-            limit: limit.unwrap_or(0),
+            limit: limit.unwrap_or(held),
             hint: "use a larger --mesh-size, --link-min-size or --link-separation, or raise --memory-limit".into(),
         });
     }

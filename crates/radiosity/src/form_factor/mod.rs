@@ -143,7 +143,10 @@ pub struct Options {
     /// Adaptive: integrate numerically even for pairs with no possible occluder (which
     /// otherwise take the exact contour integral). For validating the integration.
     pub adaptive_always_integrate: bool,
-    /// Memory the collected rows may use, in bytes (None: what the system has available).
+    /// Memory limit in bytes: what the collected rows may use, or on the hierarchical
+    /// transport the whole run's predicted peak resident memory, watched again while the
+    /// links are refined (None: what the system has available; see
+    /// [`crate::form_factor::hierarchical::predict_peak`]).
     pub memory_limit: Option<u64>,
 }
 

@@ -98,7 +98,7 @@ pub fn available_memory() -> Option<u64> {
     for line in text.lines() {
         if let Some(rest) = line.strip_prefix("MemAvailable:") {
             let kb: u64 = rest.trim().trim_end_matches("kB").trim().parse().ok()?;
-            return Some(kb * 1024);
+            return kb.checked_mul(1024);
         }
     }
     None
@@ -110,7 +110,7 @@ pub fn resident_memory() -> Option<u64> {
     let text = std::fs::read_to_string("/proc/self/status").ok()?;
     let rest = text.lines().find_map(|l| l.strip_prefix("VmRSS:"))?;
     let kb: u64 = rest.trim().trim_end_matches("kB").trim().parse().ok()?;
-    Some(kb * 1024)
+    kb.checked_mul(1024)
 }
 
 #[cfg(test)]

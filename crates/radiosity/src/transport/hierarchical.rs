@@ -803,7 +803,7 @@ pub struct Hierarchy {
     /// Ray-traced rows of the elements that the links serve badly (see
     /// [`Hierarchy::set_ray_rows`]): their links are switched off.
     ray_rows: Option<SparseRows>,
-    /// Faces that cluster receivers' links must not light ([`Exclusion`]).
+    /// Faces that cluster receivers' links must not light ([`Exclusion`]), sorted by face.
     exclusions: Vec<Exclusion>,
     /// What it holds.
     pub stats: HierarchyStats,
@@ -968,7 +968,11 @@ impl Hierarchy {
             fixed_scale: vec![1.0; n],
             direct,
             ray_rows: None,
-            exclusions,
+            exclusions: {
+                let mut ex = exclusions;
+                ex.sort_by_key(|e| (e.c, e.s));
+                ex
+            },
             stats,
             buffers: BufferCell::default(),
         };
@@ -1244,14 +1248,16 @@ impl Hierarchy {
             let mut bins = vec![[DVec3::ZERO; 3]; 2 * DIR_BINS];
             let mut lit = Vec::new();
             self.walk_clusters(0, &mut bins, &mut [0; 3], &src, &mut lit);
+            let ex = &self.exclusions;
             for (c, v) in lit {
-                g[c as usize].0 += v;
-            }
-            // What the walk handed to faces that see nothing of a link's source.
-            for ex in &self.exclusions {
-                let v = self.read_source(ex.s as usize, ex.dir, ex.near, &src);
-                let gc = &mut g[ex.c as usize].0;
-                *gc = (*gc - v * ex.coef as f64).max(Rgb::ZERO);
+                // Less what the walk handed the face from sources it cannot see (exclusions
+                // sorted by face), clamped on the walk's own value: the face's other links
+                // stay whole.
+                let first = ex.partition_point(|e| e.c < c);
+                let taken = ex[first..].iter().take_while(|e| e.c == c).fold(Rgb::ZERO, |t, e| {
+                    t + self.read_source(e.s as usize, e.dir, e.near, &src) * e.coef as f64
+                });
+                g[c as usize].0 += (v - taken).max(Rgb::ZERO);
             }
         }
         // Push: every ancestor's irradiance, evaluated at the child's centroid, top-down
@@ -1514,7 +1520,7 @@ impl Hierarchy {
     /// RGB; for a cluster receiver each leaf's share by its normal, see [`DIR_BIN_SIDE`]),
     /// summed link by link without the push: what the leaves must receive in all (the
     /// push–pull conservation check; equal to `Σ_i A_i (F·x)_i` while no row is scaled and
-    /// no leaf's normal-dependent irradiance is clamped at zero).
+    /// no leaf's normal-dependent irradiance, nor a face's irradiance less its exclusions, is clamped at zero).
     pub fn link_power(&self, x: &[Rgb]) -> f64 {
         let nodes = &self.tree.nodes;
         let mut total = 0.0;
