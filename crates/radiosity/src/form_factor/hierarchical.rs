@@ -1143,9 +1143,9 @@ impl Ctx<'_> {
             // only for a receiver of at most BEHIND_CLUSTER_FACES faces.
             let [a, b] = self.tree.top_range[r as usize];
             if (b - a) as usize <= BEHIND_CLUSTER_FACES {
-                sc.behind.extend(self.tree.top_id[a as usize..b as usize].iter().copied().filter(|&q| {
+                sc.behind.extend(self.tree.top_id[a as usize..b as usize].iter().filter_map(|&q| {
                     let nq = self.node(q);
-                    nq.area > 0.0 && box_plane_range(ns, nq.centroid.as_dvec3(), nq.normal()).1 <= tol
+                    (nq.area > 0.0 && box_plane_range(ns, nq.centroid.as_dvec3(), nq.normal()).1 <= tol).then_some((q, 0.0))
                 }));
             }
             return;
@@ -1175,7 +1175,7 @@ impl Ctx<'_> {
                 // Wholly in S's plane or behind it, or S wholly in its plane or behind it.
                 let behind_s = b <= tol && nq.normal().dot(n) < 0.999;
                 if behind_s || box_plane_range(ns, nq.centroid.as_dvec3(), nq.normal()).1 <= tol {
-                    sc.behind.push(q);
+                    sc.behind.push((q, 0.0));
                 }
                 continue;
             }
@@ -1184,10 +1184,10 @@ impl Ctx<'_> {
         sc.behind_walk = walk;
     }
 
-    /// For a link from the surface `s` to cluster `r` arriving from `d`: keeps in
-    /// `sc.behind` the faces of `r` behind `s` ([`Ctx::faces_behind`]) that would take at
-    /// least [`BEHIND_SHARE`] of what the link hands out, and returns the sum of their
-    /// front areas (`Tree::front_area`, their share of the link's spread). Smaller ones stay
+    /// For a link from `s` to cluster `r` arriving from `d`: keeps in `sc.behind` the faces
+    /// of `r` that see nothing of `s` ([`Ctx::faces_behind`]) and would take at least
+    /// [`BEHIND_SHARE`] of what the link hands out, each with its front area
+    /// (`Tree::front_area`, its share of the link's spread), and returns their sum. Smaller ones stay
     /// lit: on Sponza, two-sided throughout, recording every one took more memory than the
     /// links.
     fn behind_shares(&self, r: u32, s: u32, tol: f64, d: DVec3, near: bool, sc: &mut Scratch) -> f64 {
@@ -1196,25 +1196,20 @@ impl Ctx<'_> {
             return 0.0;
         }
         let floor = BEHIND_SHARE * self.tree.front_area(r, d, !near);
-        let mut sum = 0.0;
-        sc.behind.retain(|&q| {
-            let share = self.tree.front_area(q, d, !near);
-            let keep = share > 0.0 && share >= floor;
-            if keep {
-                sum += share;
-            }
-            keep
-        });
-        sum
+        for (q, share) in sc.behind.iter_mut() {
+            *share = self.tree.front_area(*q, d, !near);
+        }
+        sc.behind.retain(|&(_, share)| share > 0.0 && share >= floor);
+        sc.behind.iter().map(|&(_, share)| share).sum()
     }
 
     /// Records the faces in `sc.behind` ([`Ctx::behind_shares`]) as exclusions of a link of
-    /// factor `w` from `s` arriving from `d`: what the walk would hand each of them.
-    fn exclude_behind(&self, s: u32, w: f64, d: DVec3, near: bool, dir: [f32; 4], sc: &mut Scratch) {
-        for &q in &sc.behind {
-            let share = self.tree.front_area(q, d, !near);
+    /// factor `w` from `s`: what the walk would hand each of them, `w` × its share over
+    /// its area.
+    fn exclude_behind(&self, s: u32, w: f64, near: bool, dir: [f32; 4], sc: &mut Scratch) {
+        for &(q, share) in &sc.behind {
             let a = self.node(q).area as f64;
-            if share > 0.0 && a > 0.0 {
+            if a > 0.0 {
                 sc.exclusions.push(Exclusion { c: q, s, coef: (w * share / a) as f32, dir, near });
             }
         }
@@ -1505,7 +1500,7 @@ impl Ctx<'_> {
                     let read = if ns.surface { Link::MEAN } else { self.reading_towards(s, -d, near) };
                     let w = (f * nr.area as f64 / spread).min(1.0);
                     links.push(Link { r, s, f: w as f32, g: d.as_vec3().to_array(), dir: read, near });
-                    self.exclude_behind(s, w, d, near, read, sc);
+                    self.exclude_behind(s, w, near, read, sc);
                 }
             }
             return;
@@ -1551,7 +1546,7 @@ impl Ctx<'_> {
                     links.push(Link { r, s, f: w as f32, g: d.as_vec3().to_array(), dir: read, near });
                     if ns.surface {
                         self.behind_shares(r, s, tol, d, near, sc);
-                        self.exclude_behind(s, w, d, near, read, sc);
+                        self.exclude_behind(s, w, near, read, sc);
                     }
                 }
                 return;
@@ -1975,9 +1970,10 @@ struct Scratch {
     receiver: Vec<DVec3>,
     /// Point pairs (position, normal, polygon) of [`Ctx::terminal_factor`].
     pairs: Vec<((DVec3, DVec3, u32), (DVec3, DVec3, u32))>,
-    /// Faces of a cluster receiver behind a surface source ([`Ctx::faces_behind`]) and the
+    /// Faces of a cluster receiver that see nothing of a source ([`Ctx::faces_behind`]),
+    /// with their share of the link's spread once [`Ctx::behind_shares`] has set it, and the
     /// walk that finds them.
-    behind: Vec<u32>,
+    behind: Vec<(u32, f64)>,
     behind_walk: Vec<u32>,
     /// The task's exclusions so far.
     exclusions: Vec<Exclusion>,
@@ -2090,7 +2086,7 @@ mod tests {
             let mut found: Vec<u32> = sc
                 .behind
                 .iter()
-                .flat_map(|&q| {
+                .flat_map(|&(q, _)| {
                     let nd = &tree.nodes[q as usize];
                     (nd.first..nd.first + nd.count).map(|i| tree.order[i as usize])
                 })
@@ -2132,15 +2128,9 @@ mod tests {
             eprintln!("skipping: this system does not report resident memory");
             return;
         }
-        let mut d = SceneDesc { name: "pair".into(), ..Default::default() };
-        d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
         let floor = [v(0.0, 0.0, 0.0), v(0.0, 0.0, 1.0), v(1.0, 0.0, 1.0), v(1.0, 0.0, 0.0)];
         let roof = [v(0.0, 1.0, 0.0), v(1.0, 1.0, 0.0), v(1.0, 1.0, 1.0), v(0.0, 1.0, 1.0)];
-        for (k, q) in [floor, roof].into_iter().enumerate() {
-            d.objects.push(ObjectDesc { name: format!("o{k}"), loc: None });
-            d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: q.to_vec(), material: 0, object: k as u32, loc: None });
-        }
-        let scene = Scene::from_desc(d).unwrap();
+        let scene = quads(&[floor, roof], false);
         let mesh = crate::mesh::mesh_uniform(&scene, 0.25);
         let rays = SceneRays::new(&scene.polygons);
         let receivers = Receivers::all_open(&mesh);

@@ -94,21 +94,19 @@ impl DenseMatrix {
 /// Memory available to this process in bytes: `MemAvailable` from `/proc/meminfo` (Linux),
 /// None elsewhere or when it cannot be read.
 pub fn available_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    for line in text.lines() {
-        if let Some(rest) = line.strip_prefix("MemAvailable:") {
-            let kb: u64 = rest.trim().trim_end_matches("kB").trim().parse().ok()?;
-            return kb.checked_mul(1024);
-        }
-    }
-    None
+    proc_kb("/proc/meminfo", "MemAvailable:")
 }
 
 /// Resident memory of this process in bytes: `VmRSS` from `/proc/self/status` (Linux), None
 /// elsewhere or when it cannot be read. What a run holds already when it predicts its peak.
 pub fn resident_memory() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/self/status").ok()?;
-    let rest = text.lines().find_map(|l| l.strip_prefix("VmRSS:"))?;
+    proc_kb("/proc/self/status", "VmRSS:")
+}
+
+/// The value of the line starting with `key` in the `/proc` file `path`, in kB, as bytes.
+fn proc_kb(path: &str, key: &str) -> Option<u64> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let rest = text.lines().find_map(|l| l.strip_prefix(key))?;
     let kb: u64 = rest.trim().trim_end_matches("kB").trim().parse().ok()?;
     kb.checked_mul(1024)
 }
