@@ -515,9 +515,14 @@ impl Prepared {
                 "analytic form factors ignore occlusion, so surfaces exchange light through what stands between them: \
                  use point-sampled, monte-carlo, hemicube or adaptive form factors"
             }
-            (Some(Operator::Hierarchical(_)), _) => {
+            (Some(Operator::Hierarchical(h)), _) if h.stats.min_size > 0.0 => {
                 "the hierarchical operator's closure fit scales short rows up as a whole and overshoots at coarse link \
                  sizes (BENCHMARKS.md): a smaller --link-min-size reduces it, --transport rows avoids it"
+            }
+            // Links already reach the elements: no smaller minimum size to suggest.
+            (Some(Operator::Hierarchical(_)), _) => {
+                "the hierarchical operator's closure fit scales short rows up as a whole and overshoots where surfaces \
+                 nearly touch (a lamp just under a ceiling; BENCHMARKS.md): --transport rows avoids it"
             }
             (_, Some(st)) if st.guard.rows_corrected > 0 => {
                 "rows of form factors that summed above 1 were scaled, and their columns still send more than \
