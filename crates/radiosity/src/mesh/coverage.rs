@@ -9,10 +9,10 @@
 //! k = 1, 2, 3) and a point is *covered* when every one of [`PROBES`] probe rays leaving it
 //! (cosine-distributed about the normal) hits the back side of a surface first, i.e. the
 //! point lies inside a closed solid (for two-sided surfaces, "back" is the side opposite
-//! the input winding's front; where the first probe to meet a back copy meets that of a
-//! lone emitter, one with an edge no other polygon shares, the point is covered only if
-//! the copy is covered there too: a lamp's emitting back is a surface, not the inside of a
-//! solid). Form factors are gathered at open points only, so the
+//! the input winding's front; where a probe meets the back copy of a lone emitter, one
+//! with an edge no other polygon shares, the point is covered only if the copy is covered
+//! there too, tested at the first such hit: a lamp's emitting back is a surface, not the
+//! inside of a solid). Form factors are gathered at open points only, so the
 //! element's value is the radiosity of its open part; per-object averages weight each
 //! element by its open fraction (covered area counts as zero, as in the path-traced
 //! references), and the power formulation uses open areas.
@@ -389,8 +389,9 @@ struct Probe<'a> {
 fn lone_emitters(scene: &Scene) -> Vec<bool> {
     use std::collections::HashMap;
     type Key = ([u64; 3], [u64; 3]);
+    // Vertices equal up to rounding (and ±0) share a key, as the mesher's do.
     let key = |a: DVec3, b: DVec3| -> Key {
-        let (ka, kb) = (a.to_array().map(f64::to_bits), b.to_array().map(f64::to_bits));
+        let (ka, kb) = (a.to_array().map(super::uniform::round_key), b.to_array().map(super::uniform::round_key));
         if ka <= kb { (ka, kb) } else { (kb, ka) }
     };
     let emits = |p: &crate::scene::Polygon| scene.materials[p.material as usize].is_emitter();
