@@ -96,7 +96,8 @@ pub struct RenderArgs {
     /// and frames.json): light flowing into the scene bounce by bounce (progressive
     /// refinement: after 1, 2, 4 … shots, then every n shots). Frames are Gouraud previews
     /// of the first view, all at the final image's exposure: with jacobi the sequence
-    /// brightens bounce by bounce; progressive refinement shows its ambient estimate of the
+    /// brightens bounce by bounce (chebyshev, the default, takes fewer and larger steps
+    /// after its first few); progressive refinement shows its ambient estimate of the
     /// light not yet shot, so its first frames are flat and bright and settle.
     #[arg(long, value_name = "DIR")]
     pub frames: Option<PathBuf>,

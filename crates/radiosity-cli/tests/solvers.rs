@@ -18,7 +18,7 @@ fn tempdir(name: &str) -> std::path::PathBuf {
 #[test]
 fn every_solver_by_name_writes_a_report_with_its_energy_balance() {
     let dir = tempdir("names");
-    for name in ["direct", "jacobi", "gauss-seidel", "shooting", "progressive", "stochastic-jacobi", "stochastic-shooting"] {
+    for name in ["direct", "jacobi", "chebyshev", "gauss-seidel", "shooting", "progressive", "stochastic-jacobi", "stochastic-shooting"] {
         let out = radiosity(&dir, &["solve", "cornell", "--mesh-size", "150", "--solver", name, "--rays", "50000", "--report", "r.json"]);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(out.status.success(), "{name}: {err}");
@@ -46,7 +46,7 @@ fn solver_all_plots_and_tabulates_every_solver() {
     let r: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("r.json")).unwrap()).unwrap();
     assert_eq!(r["reference_solver"], "direct");
     let rows = r["comparison"].as_array().unwrap();
-    assert_eq!(rows.len(), 7);
+    assert_eq!(rows.len(), 8);
     for row in rows {
         let name = row["solver"].as_str().unwrap();
         if name == "stochastic-jacobi" {
@@ -58,7 +58,7 @@ fn solver_all_plots_and_tabulates_every_solver() {
         let diff = row["difference_from_reference"].as_f64().unwrap();
         // Gathering solvers agree with direct; shooting differs by F's reciprocity error,
         // the stochastic ones by their noise and F's.
-        let bound = if ["jacobi", "gauss-seidel", "progressive", "direct"].contains(&name) { 1e-3 } else { 0.05 };
+        let bound = if ["jacobi", "chebyshev", "gauss-seidel", "progressive", "direct"].contains(&name) { 1e-3 } else { 0.05 };
         assert!(diff < bound, "{name}: {diff}");
     }
     let _ = std::fs::remove_dir_all(&dir);
@@ -86,7 +86,7 @@ fn solver_all_max_iterations_caps_every_solver_in_its_documented_unit() {
     let n = r["elements"].as_u64().unwrap();
     assert_eq!(n, 96);
     let rows = r["comparison"].as_array().unwrap();
-    assert_eq!(rows.len(), 7);
+    assert_eq!(rows.len(), 8);
     for row in rows {
         let name = row["solver"].as_str().unwrap();
         let s = &row["stats"];
@@ -100,7 +100,7 @@ fn solver_all_max_iterations_caps_every_solver_in_its_documented_unit() {
         } else {
             assert!(iterations <= 5, "{name}: {iterations} iterations under --max-iterations 5");
         }
-        if ["jacobi", "gauss-seidel", "shooting"].contains(&name) {
+        if ["jacobi", "chebyshev", "gauss-seidel", "shooting"].contains(&name) {
             assert_eq!((iterations, s["stop"].as_str().unwrap()), (5, "max-iterations"), "{name}");
         }
     }

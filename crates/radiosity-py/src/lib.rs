@@ -597,8 +597,8 @@ fn load_scene(py: Python<'_>, path: String) -> PyResult<Scene> {
 /// Parameters
 /// ----------
 /// scene : a `Scene` from `load_scene`
-/// solver : "jacobi" (default), "gauss-seidel", "southwell", "progressive", "shooting",
-///     "direct", "stochastic-jacobi" ...
+/// solver : "chebyshev" (default), "jacobi", "gauss-seidel", "shooting", "progressive",
+///     "direct", "stochastic-jacobi", "stochastic-shooting"
 /// method : form factors ("point-sampled" default, "hemicube", "monte-carlo", "analytic",
 ///     "adaptive")
 /// mesh_size : element size (default: diagonal / 40)
@@ -611,7 +611,7 @@ fn load_scene(py: Python<'_>, path: String) -> PyResult<Scene> {
 /// front side (linear RGB, W/m² and W/(m² sr) for a scene in metres with Ke in
 /// W/(m² sr)), "report" (the full JSON report of `radiosity render`, as a dict).
 #[pyfunction]
-#[pyo3(signature = (scene, *, solver="jacobi", method="point-sampled", mesh_size=None, two_sided=false,
+#[pyo3(signature = (scene, *, solver="chebyshev", method="point-sampled", mesh_size=None, two_sided=false,
     tolerance=None, max_iterations=None, seed=0))]
 #[allow(clippy::too_many_arguments)]
 fn solve<'py>(

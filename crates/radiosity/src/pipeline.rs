@@ -49,7 +49,7 @@ impl Default for Settings {
         Settings {
             mesh_size: None,
             form_factors: form_factor::Options::default(),
-            solver: Solver::Jacobi,
+            solver: Solver::Chebyshev,
             solve: solve::Options::default(),
             max_elements: DEFAULT_MAX_ELEMENTS,
             adaptive: None,
@@ -184,7 +184,7 @@ fn prepare(
     let kind = resolve_transport(settings, count, patches, any_solver);
     if settings.transport == transport::Kind::Auto && kind == transport::Kind::Hierarchical {
         progress.message(&format!(
-            "transport: {kind} ({patches} polygons, {count} elements; auto picks hierarchical from {} polygons or above {} elements for jacobi and the stochastic solvers)",
+            "transport: {kind} ({patches} polygons, {count} elements; auto picks hierarchical from {} polygons or above {} elements for jacobi, chebyshev and the stochastic solvers)",
             transport::AUTO_PATCHES,
             transport::AUTO_ELEMENTS
         ));
@@ -198,7 +198,7 @@ fn prepare(
             return Err(Error::Invalid(format!("{what}; --transport rows computes form-factor rows (drop them, or use --transport hierarchical)")));
         }
         progress.warning(&format!(
-            "{what}, which this run does not use: auto picked form-factor rows ({patches} polygons, {count} elements; hierarchical from {} polygons or above {} elements, for jacobi and the stochastic solvers with point-sampled form factors, without --adaptive); --transport hierarchical uses them",
+            "{what}, which this run does not use: auto picked form-factor rows ({patches} polygons, {count} elements; hierarchical from {} polygons or above {} elements, for jacobi, chebyshev and the stochastic solvers with point-sampled form factors, without --adaptive); --transport hierarchical uses them",
             transport::AUTO_PATCHES,
             transport::AUTO_ELEMENTS
         ));
@@ -595,12 +595,12 @@ pub fn resolve_transport(settings: &Settings, count: u64, patches: u64, any_solv
 }
 
 /// Refuses, before any work, a deterministic solver that needs explicit rows on the
-/// hierarchical operator (only Jacobi multiplies by F alone).
+/// hierarchical operator (only Jacobi and Chebyshev multiply by F alone).
 pub fn check_transport(solver: Solver, kind: transport::Kind) -> Result<()> {
-    if kind == transport::Kind::Hierarchical && !solver.is_stochastic() && solver != Solver::Jacobi {
+    if kind == transport::Kind::Hierarchical && !solver.is_stochastic() && !matches!(solver, Solver::Jacobi | Solver::Chebyshev) {
         return Err(Error::Invalid(format!(
             "the {solver} solver reads rows or columns of F, which the hierarchical operator does not store: \
-             use --solver jacobi (or a stochastic solver) with --transport hierarchical, or --transport rows"
+             use --solver jacobi or chebyshev (or a stochastic solver) with --transport hierarchical, or --transport rows"
         )));
     }
     Ok(())

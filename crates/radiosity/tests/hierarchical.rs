@@ -391,8 +391,8 @@ fn solvers_that_need_rows_are_refused_before_any_work() {
         assert!(err.to_string().contains("--solver jacobi"), "{err}");
         assert!(stages.0.lock().unwrap().is_empty(), "{solver}: stages begun {:?}", stages.0.lock().unwrap());
     }
-    // Jacobi and the stochastic solvers run.
-    for solver in [Solver::Jacobi, Solver::StochasticShooting] {
+    // Jacobi, Chebyshev and the stochastic solvers run.
+    for solver in [Solver::Jacobi, Solver::Chebyshev, Solver::StochasticShooting] {
         let scene = Scene::from_desc(builtin::cornell()).unwrap();
         let mut s = Settings { solver, mesh_size: Some(100.0), ..hierarchical() };
         s.solve.max_iterations = 20;
