@@ -644,7 +644,16 @@ fn normalized(path: &Path) -> PathBuf {
 pub fn energy_summary(e: &radiosity::report::EnergyReport) -> String {
     let lum = |c: [f64; 3]| radiosity::luminance(glam::DVec3::from_array(c));
     let emitted = lum(e.emitted).max(f64::MIN_POSITIVE);
-    let pct = |c: [f64; 3]| 100.0 * lum(c) / emitted;
+    // A share that rounds to zero prints as 0.00, not −0.00 (a solve whose last iterate
+    // overshot by a hair leaves a tiny negative unshot share).
+    let pct = |c: [f64; 3]| {
+        let v = 100.0 * lum(c) / emitted;
+        if v.abs() < 0.005 {
+            0.0
+        } else {
+            v
+        }
+    };
     let line = format!(
         "energy: emitted {:.4e} = absorbed {:.2} % + escaped {:.2} % + back faces {:.2} % + unshot {:.2} % (imbalance {:.1e})",
         lum(e.emitted),

@@ -27,14 +27,33 @@ pub fn stopped() -> bool {
     STOP.load(Ordering::Relaxed)
 }
 
+/// How often a long stage logs its progress when stderr is no terminal.
+const LOG_EVERY: Duration = Duration::from_secs(30);
+
+/// The progress line a long stage logs without a terminal: where it is, the time so far
+/// and, once something is done, the time left at the rate so far.
+fn log_line(stage: &str, pos: u64, total: u64, seconds: f64) -> String {
+    let mut line = format!("{stage}: {pos}/{total}");
+    if total > 0 {
+        line += &format!(" ({:.0} %)", 100.0 * pos as f64 / total as f64);
+    }
+    line += &format!(", {seconds:.0} s");
+    if pos > 0 && total > pos {
+        line += &format!(", about {:.0} s left", seconds * (total - pos) as f64 / pos as f64);
+    }
+    line
+}
+
 /// Progress bars on stderr; silent when `quiet` or stderr is not a terminal (messages
-/// still print unless quiet).
+/// still print unless quiet; a long stage then logs a line every 30 s).
 pub struct CliProgress {
     bar: Mutex<Option<ProgressBar>>,
     /// The current stage and when it began (for the log line when stderr is no terminal).
     stage: Mutex<Option<(String, std::time::Instant)>>,
     /// Every finished stage with its seconds, for the report.
     done: Mutex<Vec<radiosity::report::StageTime>>,
+    /// When the last progress line of the current stage was logged (no terminal only).
+    logged: Mutex<std::time::Instant>,
     quiet: bool,
     log: bool,
 }
@@ -47,6 +66,7 @@ impl CliProgress {
             bar: Mutex::new(None),
             stage: Mutex::new(None),
             done: Mutex::new(Vec::new()),
+            logged: Mutex::new(std::time::Instant::now()),
             quiet,
             log: !std::io::stderr().is_terminal(),
         }
@@ -61,6 +81,7 @@ impl CliProgress {
 impl Progress for CliProgress {
     fn begin(&self, stage: &str, total: u64) {
         *self.stage.lock().unwrap() = Some((stage.to_string(), std::time::Instant::now()));
+        *self.logged.lock().unwrap() = std::time::Instant::now();
         if self.quiet {
             return;
         }
@@ -77,6 +98,17 @@ impl Progress for CliProgress {
     fn advance(&self, n: u64) {
         if let Some(b) = self.bar.lock().unwrap().as_ref() {
             b.inc(n);
+            // Without a terminal the bar is hidden: a long stage logs where it is every
+            // LOG_EVERY, so a log (CI, nohup, a pipe) shows that the work goes on.
+            if self.log {
+                let mut last = self.logged.lock().unwrap();
+                if last.elapsed() >= LOG_EVERY {
+                    *last = std::time::Instant::now();
+                    if let Some((stage, t)) = self.stage.lock().unwrap().as_ref() {
+                        eprintln!("{}", log_line(stage, b.position(), b.length().unwrap_or(0), t.elapsed().as_secs_f64()));
+                    }
+                }
+            }
         }
     }
     fn end(&self) {
@@ -113,5 +145,18 @@ impl Progress for CliProgress {
     }
     fn should_stop(&self) -> bool {
         stopped()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::log_line;
+
+    #[test]
+    fn a_long_stage_logs_its_position_and_the_time_left() {
+        assert_eq!(log_line("form factors", 25, 100, 30.0), "form factors: 25/100 (25 %), 30 s, about 90 s left");
+        // Nothing done yet: no estimate; done: none left to estimate.
+        assert_eq!(log_line("links", 0, 10, 31.0), "links: 0/10 (0 %), 31 s");
+        assert_eq!(log_line("links", 10, 10, 40.0), "links: 10/10 (100 %), 40 s");
     }
 }
