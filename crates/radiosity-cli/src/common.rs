@@ -245,10 +245,12 @@ impl SolveFlags {
         if self.sky.is_some() && self.sky_image.is_some() {
             anyhow::bail!("--sky and --sky-image: give a uniform sky or an environment image, not both");
         }
+        // The scene's portals stay with a sky the flags replace.
+        let portals = desc.sky.as_ref().map_or(Vec::new(), |s| s.portals.clone());
         if let Some(l) = self.sky {
             let sun = desc.sky.as_ref().and_then(|s| s.sun);
             let radiance = radiosity::Rgb::from_array(l);
-            desc.sky = (radiance.max_element() > 0.0 || sun.is_some()).then_some(scene::Sky { radiance, sun, environment: None });
+            desc.sky = (radiance.max_element() > 0.0 || sun.is_some()).then_some(scene::Sky { radiance, sun, environment: None, portals: portals.clone() });
         }
         if let Some(path) = &self.sky_image {
             if !(self.sky_strength.is_finite() && self.sky_strength >= 0.0) {
@@ -266,7 +268,7 @@ impl SolveFlags {
                 rotation_deg: self.sky_rotation,
             };
             let sun = desc.sky.as_ref().and_then(|s| s.sun);
-            desc.sky = Some(scene::Sky { radiance: radiosity::Rgb::ZERO, sun, environment: Some(env) });
+            desc.sky = Some(scene::Sky { radiance: radiosity::Rgb::ZERO, sun, environment: Some(env), portals: portals.clone() });
         } else if self.sky_strength != 1.0 || self.sky_rotation != 0.0 {
             anyhow::bail!("--sky-strength and --sky-rotation need --sky-image");
         }
@@ -282,7 +284,7 @@ impl SolveFlags {
                 angular_diameter_deg: self.sun_diameter,
             });
             desc.sky = (radiance.max_element() > 0.0 || sun.is_some() || environment.is_some())
-                .then_some(scene::Sky { radiance, sun, environment });
+                .then_some(scene::Sky { radiance, sun, environment, portals: portals.clone() });
         }
         let scene = Scene::from_desc(desc)?;
         for w in &scene.warnings {

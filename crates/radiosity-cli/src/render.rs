@@ -78,7 +78,7 @@ pub struct RenderArgs {
     /// radiosity of the element it meets; 0 interpolates the indirect light from the mesh's
     /// vertices instead (no rays, no noise; as exact as the form factors, as coarse as the
     /// mesh) [default: 2 on the hierarchical transport with a minimum link size (above
-    /// 50000 elements) and for the stochastic solvers (4 under a sky, whose direct light
+    /// 50000 elements) and for the stochastic solvers (4 under a sky without portals, whose direct light
     /// these rays also estimate), 0 on form-factor rows and on a hierarchy refined down to
     /// the elements (where 4 × 4 rays per sample estimate a sky)]
     #[arg(long, value_name = "N")]

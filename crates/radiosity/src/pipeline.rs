@@ -913,12 +913,17 @@ impl Solved {
     /// solvers, whose per-element indirect estimate is noisy (classroom 15.4 % interpolated,
     /// 11.2 % gathered). BENCHMARKS.md "Fifth round".
     /// Under a sky the gathered axis is [`gather::SKY_AXIS`]: the gather rays then also
-    /// estimate the sky's direct light, whose noise dominates an open scene.
+    /// estimate the sky's direct light, whose noise dominates an open scene; with portals
+    /// ([`crate::scene::Portal`]) it is 2 again, the portals' own rays taking that light
+    /// (Sponza's courtyard: 3.31 % against the path tracer at 2 × 2 with its portal,
+    /// 3.25 % at 4 × 4 without; BENCHMARKS.md "Sky portals").
     pub fn default_gather_axis(&self) -> usize {
         match &self.transport {
             Some(Operator::Rows(_)) => 0,
             Some(Operator::Hierarchical(h)) if h.stats.min_size <= 0.0 => 0,
-            Some(Operator::Hierarchical(_)) | None if self.scene.lit_sky().is_some() => gather::SKY_AXIS,
+            // Portals take the sky's direct light: the rays then read only what they meet
+            // (and sky outside the portals), as without a sky.
+            Some(Operator::Hierarchical(_)) | None if self.scene.lit_sky().is_some_and(|s| s.portals.is_empty()) => gather::SKY_AXIS,
             Some(Operator::Hierarchical(_)) | None => 2,
         }
     }

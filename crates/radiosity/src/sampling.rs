@@ -84,3 +84,94 @@ pub fn radical_inverse(base: u64, mut i: u64) -> f64 {
     }
     r
 }
+
+/// A spherical triangle (unit vertex directions) sampled uniformly in solid angle (Arvo
+/// 1995, "Stratified sampling of spherical triangles"): the final gather's sky portals.
+#[derive(Clone, Copy, Debug)]
+pub struct SphericalTriangle {
+    a: glam::DVec3,
+    b: glam::DVec3,
+    c: glam::DVec3,
+    alpha: f64,
+    /// Solid angle, steradians.
+    pub area: f64,
+}
+
+impl SphericalTriangle {
+    /// The triangle of unit directions `a`, `b`, `c`; None when it subtends (almost) no
+    /// solid angle (its angles' excess below 1e-9 sr, where the angle sum cancels).
+    pub fn new(a: glam::DVec3, b: glam::DVec3, c: glam::DVec3) -> Option<Self> {
+        // The angle at p between the great circles towards q and r.
+        let angle = |p: glam::DVec3, q: glam::DVec3, r: glam::DVec3| {
+            let (u, v) = (p.cross(q), p.cross(r));
+            let (lu, lv) = (u.length(), v.length());
+            if lu > 0.0 && lv > 0.0 {
+                (u.dot(v) / (lu * lv)).clamp(-1.0, 1.0).acos()
+            } else {
+                f64::NAN
+            }
+        };
+        let alpha = angle(a, b, c);
+        let area = alpha + angle(b, c, a) + angle(c, a, b) - std::f64::consts::PI;
+        (area.is_finite() && area > 1e-9).then_some(SphericalTriangle { a, b, c, alpha, area })
+    }
+
+    /// The direction for `(u1, u2)` ∈ [0,1)², uniform in solid angle (density `1/area`),
+    /// keeping stratification.
+    pub fn sample(&self, u1: f64, u2: f64) -> glam::DVec3 {
+        let (a, b, c) = (self.a, self.b, self.c);
+        // The sub-triangle A B Ĉ of area u1·area fixes Ĉ on the arc AC ...
+        let (s, t) = (u1 * self.area - self.alpha).sin_cos();
+        let (sa, ca) = self.alpha.sin_cos();
+        let u = t - ca;
+        let v = s + sa * a.dot(b);
+        let q = (((v * t - u * s) * ca - v) / ((v * s + u * t) * sa)).clamp(-1.0, 1.0);
+        let c_hat = a * q + (c - a * c.dot(a)).normalize_or_zero() * (1.0 - q * q).max(0.0).sqrt();
+        // ... and u2 a point on the arc B Ĉ, uniform in the area it sweeps.
+        let z = 1.0 - u2 * (1.0 - c_hat.dot(b));
+        b * z + (c_hat - b * c_hat.dot(b)).normalize_or_zero() * (1.0 - z * z).max(0.0).sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::DVec3;
+
+    use super::*;
+
+    /// Directions drawn uniformly over a spherical triangle, weighted by cos θ, integrate to
+    /// π·F (the point-to-polygon factor's contour integral) for triangles near and far,
+    /// large and grazing; every direction falls inside the triangle.
+    #[test]
+    fn spherical_triangle_samples_integrate_the_cosine_exactly() {
+        let x = DVec3::ZERO;
+        let n = DVec3::Y;
+        let cases = [
+            [DVec3::new(-1.0, 1.0, -1.0), DVec3::new(1.0, 1.0, -1.0), DVec3::new(0.0, 1.0, 1.5)],
+            [DVec3::new(-8.0, 0.5, -8.0), DVec3::new(8.0, 0.5, -8.0), DVec3::new(8.0, 0.5, 8.0)],
+            [DVec3::new(2.0, 3.0, 0.1), DVec3::new(2.3, 3.0, 0.1), DVec3::new(2.0, 3.4, 0.3)],
+            [DVec3::new(0.2, 0.1, 1.0), DVec3::new(3.0, 2.0, 1.0), DVec3::new(-1.0, 4.0, 1.0)],
+        ];
+        for tri in cases {
+            let exact = std::f64::consts::PI * crate::geom::kernel::point_to_polygon_unsided(x, n, &tri);
+            let st = SphericalTriangle::new(tri[0].normalize(), tri[1].normalize(), tri[2].normalize()).unwrap();
+            let mut pts = Vec::new();
+            stratified(64, &mut rng_for(1, 0), &mut pts);
+            let plane = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+            let mut sum = 0.0;
+            for &(u, v) in &pts {
+                let d = st.sample(u, v);
+                assert!((d.length() - 1.0).abs() < 1e-9);
+                // Inside: the ray meets the triangle's plane within its edges.
+                let t = plane.dot(tri[0]) / plane.dot(d);
+                let q = d * t;
+                let inside = (0..3).all(|k| plane.dot((tri[(k + 1) % 3] - tri[k]).cross(q - tri[k])) >= -1e-9 * plane.length_squared());
+                assert!(t > 0.0 && inside, "{d} outside {tri:?}");
+                sum += d.dot(n).max(0.0);
+            }
+            let estimate = st.area * sum / pts.len() as f64;
+            eprintln!("{tri:?}: Ω {:.5}, ∫cos {estimate:.6} against π·F {exact:.6}", st.area);
+            assert!((estimate - exact).abs() <= 1e-3 * exact, "{estimate} against {exact}");
+        }
+    }
+}

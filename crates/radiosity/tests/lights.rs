@@ -290,7 +290,7 @@ fn a_directional_light_is_a_sun_of_no_size() {
         .iter()
         .map(|p| PolygonDesc { uvs: Vec::new(), vertices: p.vertices.clone(), material: p.material, object: p.object, loc: None })
         .collect();
-    d.sky = Some(Sky { radiance: Rgb::ZERO, sun: Some(Sun { direction: -travel, irradiance: Rgb::splat(3.0), angular_diameter_deg: 0.0 }), environment: None });
+    d.sky = Some(Sky { radiance: Rgb::ZERO, sun: Some(Sun { direction: -travel, irradiance: Rgb::splat(3.0), angular_diameter_deg: 0.0 }), environment: None, portals: Vec::new() });
     let b = solve_scene(Scene::from_desc(d).unwrap(), &s, &NoProgress).unwrap();
     let (ba, bb) = (a.solution.display_radiosity(), b.solution.display_radiosity());
     let lit = RHO * 3.0 * t.cos();

@@ -36,7 +36,12 @@
 //! ray that leaves the scene reads `π L_sky` where one that meets an element reads its
 //! `B − E`), [`SKY_AXIS`]² rays of their own per position when interpolating. A sun adds
 //! `E_sun · max(0, n·ω) · V` per position with `shadow × shadow` rays in its disk (sharp
-//! shadows), and a camera ray that meets its disk shows its radiance. Point, spot and
+//! shadows), and a camera ray that meets its disk shows its radiance. Through sky portals
+//! ([`crate::scene::Portal`]: the openings a scene's author marks, as in pbrt-v4 and
+//! Mitsuba) the sky's direct light is sampled in solid angle instead (`portal_irradiance`,
+//! one direction per shadow point, uniform over the portals' spherical triangles; Arvo
+//! 1995), and gather or sky rays that leave the scene through a portal read nothing, so each
+//! direction is counted once whatever the portals cover. Point, spot and
 //! directional lights ([`crate::lights`]) add their exact direct irradiance per position,
 //! one shadow ray each (hard shadows); they are not seen by the camera.
 //!
@@ -159,6 +164,8 @@ pub struct Shader<'a> {
     /// The lit sky (its radiance by direction; None: black).
     sky: Option<&'a crate::scene::Sky>,
     sun: Option<crate::scene::Sun>,
+    /// The lit sky's portals (empty without a lit sky).
+    portals: &'a [crate::scene::Portal],
     shadow_axis: usize,
     /// Gather (or sky) rays per position along each axis; 0: none.
     gather_axis: usize,
@@ -195,6 +202,7 @@ impl<'a> Shader<'a> {
             ems: emitters(scene),
             sky,
             sun: scene.lit_sky().and_then(|s| s.lit_sun()),
+            portals: sky.map_or(&[][..], |s| &s.portals[..]),
             shadow_axis: opts.shadow_axis.max(1),
             gather_axis,
         }
@@ -207,7 +215,9 @@ impl<'a> Shader<'a> {
         use rand::RngExt;
         let base: u64 = rng.random();
         pat.choice.reset();
-        let npat = if self.ems.len() <= LOOP_EMITTERS { self.ems.len() } else { 1 };
+        // One shadow pattern per emitter looped over, one shared by sampled emitters and
+        // the portals.
+        let npat = (if self.ems.len() <= LOOP_EMITTERS { self.ems.len() } else { 1 }).max(usize::from(!self.portals.is_empty()));
         pat.shadows.resize_with(npat, Vec::new);
         for (t, p) in pat.shadows.iter_mut().enumerate() {
             pixel_pattern(side, self.shadow_axis, positions, &mut pattern_rng(base, t as u64 + 2), &mut pat.cells, p);
@@ -268,6 +278,12 @@ impl<'a> Shader<'a> {
             hd += sun.irradiance * f;
             nrays += r;
         }
+        if let (Some(sky), false) = (self.sky, self.portals.is_empty()) {
+            let pts = &pat.shadows[pat.shadows.len() - 1][k * m2..(k + 1) * m2];
+            let (h, r) = portal_irradiance(rays, sky, self.portals, p, el.normal, el.patch, pts);
+            hd += h;
+            nrays += r;
+        }
         if !scene.lights.is_empty() {
             let (hl, r) = crate::lights::lights_at(rays, &scene.lights, p, el.normal, el.patch);
             hd += hl;
@@ -282,11 +298,11 @@ impl<'a> Shader<'a> {
         let sky = |dir: glam::DVec3| self.sky.map_or(Rgb::ZERO, |s| s.radiance_in(dir, share) * std::f64::consts::PI);
         let hi = match self.indirect {
             Indirect::Interpolated(hv) if g2 > 0 => {
-                interpolate(mesh, e, p, hv) + gathered(mesh, rays, None, &sky, p, el.normal, el.patch, dirs)
+                interpolate(mesh, e, p, hv) + gathered(mesh, rays, None, &sky, self.portals, p, el.normal, el.patch, dirs)
             }
             Indirect::Interpolated(hv) => interpolate(mesh, e, p, hv),
             Indirect::Gathered { reflected, locator } => {
-                gathered(mesh, rays, Some((locator, reflected)), &sky, p, el.normal, el.patch, dirs)
+                gathered(mesh, rays, Some((locator, reflected)), &sky, self.portals, p, el.normal, el.patch, dirs)
             }
         };
         (hd + hi, nrays)
@@ -625,6 +641,7 @@ fn gathered(
     rays: &SceneRays,
     elements: Option<(&Locator, &[Rgb])>,
     sky: &dyn Fn(glam::DVec3) -> Rgb,
+    portals: &[crate::scene::Portal],
     p: glam::DVec3,
     n: glam::DVec3,
     patch: u32,
@@ -636,19 +653,108 @@ fn gathered(
         let d = crate::sampling::cosine_hemisphere(u1, u2);
         let dir = t * d.x + b * d.y + n * d.z;
         let Some((locator, reflected)) = elements else {
-            if rays.escapes(p.as_vec3(), dir.as_vec3(), Some(patch)) {
+            if !through_portal(portals, p, dir) && rays.escapes(p.as_vec3(), dir.as_vec3(), Some(patch)) {
                 sum += sky(dir);
             }
             continue;
         };
         let hit = rays.closest_facing(p.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(patch));
         if hit.is_none() {
-            sum += sky(dir);
+            // Sky through a portal is the portal estimate's (`portal_irradiance`).
+            if !through_portal(portals, p, dir) {
+                sum += sky(dir);
+            }
         } else if let Some(j) = locator.front_hit(mesh, rays, p, dir, hit) {
             sum += reflected[j as usize];
         }
     }
     sum * (1.0 / dirs.len() as f64)
+}
+
+/// Whether the ray `p + t·dir` (t > 0) passes through one of `portals`.
+#[inline]
+fn through_portal(portals: &[crate::scene::Portal], p: glam::DVec3, dir: glam::DVec3) -> bool {
+    portals.iter().any(|q| {
+        let v = &q.vertices;
+        let (n, den) = (q.normal, q.normal.dot(dir));
+        if den == 0.0 {
+            return false;
+        }
+        let t = n.dot(v[0] - p) / den;
+        if !(t > 0.0) {
+            return false;
+        }
+        let y = p + dir * t;
+        // Inside the convex polygon: on the same side of every edge (either winding).
+        let m = v.len();
+        let (mut pos, mut neg) = (false, false);
+        for k in 0..m {
+            let s = n.dot((v[(k + 1) % m] - v[k]).cross(y - v[k]));
+            pos |= s > 0.0;
+            neg |= s < 0.0;
+        }
+        !(pos && neg)
+    })
+}
+
+/// The sky's irradiance at `p` (normal `n`, on polygon `patch`) through `portals`:
+/// `∫ L(ω) V(ω) cos θ dω` over the directions that pass through a portal, with directions
+/// drawn uniformly in the solid angle of the portals' fan triangles (Arvo 1995;
+/// [`crate::sampling::SphericalTriangle`]), a triangle picked in proportion to its solid
+/// angle by the first coordinate of each of the stratified `pts`: `Ω · mean(L V cos θ)`,
+/// `V` whether the ray leaves the scene. Unbiased whatever the portals cover: the gather
+/// rays take the sky seen in every other direction ([`through_portal`]). Returns the
+/// irradiance and the rays cast.
+fn portal_irradiance(
+    rays: &SceneRays,
+    sky: &crate::scene::Sky,
+    portals: &[crate::scene::Portal],
+    p: glam::DVec3,
+    n: glam::DVec3,
+    patch: u32,
+    pts: &[(f64, f64)],
+) -> (Rgb, u64) {
+    use crate::sampling::SphericalTriangle;
+    // The fan triangles in front of p's tangent plane, with their solid angles cumulated.
+    let mut tris: Vec<(SphericalTriangle, f64)> = Vec::new();
+    let mut total = 0.0;
+    for q in portals {
+        let v = &q.vertices;
+        if v.iter().all(|c| n.dot(*c - p) <= 0.0) {
+            continue;
+        }
+        for k in 1..v.len() - 1 {
+            let dirs = [v[0] - p, v[k] - p, v[k + 1] - p];
+            if dirs.iter().any(|d| !(d.length_squared() > 0.0)) {
+                continue;
+            }
+            if let Some(t) = SphericalTriangle::new(dirs[0].normalize(), dirs[1].normalize(), dirs[2].normalize()) {
+                total += t.area;
+                tris.push((t, total));
+            }
+        }
+    }
+    if tris.is_empty() || pts.is_empty() {
+        return (Rgb::ZERO, 0);
+    }
+    let share = total / pts.len() as f64;
+    let (mut sum, mut nrays) = (Rgb::ZERO, 0);
+    for &(u, w) in pts {
+        let t = u * total;
+        let i = tris.partition_point(|x| x.1 <= t).min(tris.len() - 1);
+        let lo = if i == 0 { 0.0 } else { tris[i - 1].1 };
+        let uu = ((t - lo) / tris[i].0.area).clamp(0.0, 1.0 - 1e-12);
+        let d = tris[i].0.sample(uu, w);
+        let c = n.dot(d);
+        if c <= 0.0 {
+            continue;
+        }
+        nrays += 1;
+        if rays.escapes(p.as_vec3(), d.as_vec3(), Some(patch)) {
+            sum += sky.radiance_in(d, share) * c;
+        }
+    }
+    (sum * (total / pts.len() as f64), nrays)
 }
 
 #[cfg(test)]

@@ -245,6 +245,53 @@ pub struct Sky {
     pub sun: Option<Sun>,
     /// An environment image: the radiance by direction (instead of `radiance`).
     pub environment: Option<Environment>,
+    /// Portals: openings through which the sky is sampled directly by the final gather
+    /// (see [`Portal`]).
+    pub portals: Vec<Portal>,
+}
+
+/// A sky portal (as pbrt-v4's and Mitsuba's): a convex planar polygon, usually an opening
+/// of a building (a courtyard, a window), through which the final gather samples the sky
+/// in solid angle instead of finding it with cosine-distributed rays. Sky light that comes
+/// in elsewhere is still found by those rays (a ray that leaves the scene through a portal
+/// is the portal's share, any other the rays'), so a portal that misses part of an opening
+/// changes the noise, not the answer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Portal {
+    /// Corners, in order.
+    pub vertices: Vec<DVec3>,
+    /// Unit normal (either side).
+    pub normal: DVec3,
+}
+
+impl Portal {
+    /// A portal of `vertices`: at least three finite points spanning a non-zero area, in one
+    /// plane (within 1e-6 of their size) and convex; else what is wrong.
+    pub fn new(vertices: Vec<DVec3>) -> std::result::Result<Portal, String> {
+        if vertices.len() < 3 {
+            return Err(format!("a portal needs at least 3 corners, got {}", vertices.len()));
+        }
+        if let Some(v) = vertices.iter().find(|v| !v.is_finite()) {
+            return Err(format!("corner {:?} is not finite", v.to_array()));
+        }
+        let n = newell_normal(&vertices);
+        let size = vertices.iter().map(|v| (*v - vertices[0]).length()).fold(0.0, f64::max);
+        if !(n.length() > 1e-12 * size * size) || size <= 0.0 {
+            return Err("its corners span no area".into());
+        }
+        let n = n.normalize();
+        if let Some(v) = vertices.iter().find(|v| n.dot(**v - vertices[0]).abs() > 1e-6 * size) {
+            return Err(format!("corner {:?} is off the plane of the others", v.to_array()));
+        }
+        let m = vertices.len();
+        for k in 0..m {
+            let (a, b, c) = (vertices[k], vertices[(k + 1) % m], vertices[(k + 2) % m]);
+            if n.dot((b - a).cross(c - b)) < -1e-9 * size * size {
+                return Err("it is not convex (give its corners in order around it, or split it)".into());
+            }
+        }
+        Ok(Portal { vertices, normal: n })
+    }
 }
 
 /// An equirectangular (latitude–longitude) environment: linear radiance by direction, +Y
@@ -325,7 +372,7 @@ impl Sun {
 impl Sky {
     /// A uniform sky of radiance `radiance`, with no sun.
     pub fn uniform(radiance: Rgb) -> Sky {
-        Sky { radiance, sun: None, environment: None }
+        Sky { radiance, sun: None, environment: None, portals: Vec::new() }
     }
 
     /// True if the sky or its sun gives light.

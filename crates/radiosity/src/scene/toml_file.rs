@@ -35,6 +35,11 @@
 //! #                            # up (see scene::Environment), instead of `radiance`
 //! # strength = 1.0             # multiplies the image's texels
 //! # rotation = 0.0             # degrees about +Y (counter-clockwise from above)
+//! # portals = [[[0, 3, 0], [4, 3, 0], [4, 3, 2], [0, 3, 2]]]
+//! #                            # openings (convex planar polygons, not overlapping as
+//! #                            # seen from inside) through which the final gather samples
+//! #                            # the sky directly (see scene::Portal): less noise, the
+//! #                            # same light
 //! [sky.sun]                    # optional: a sun (with or without a sky radiance)
 //! direction = [0.3, 1, 0.2]    # towards the sun (normalised)
 //! irradiance = 1000            # on a surface facing it, unshadowed (exitance units)
@@ -153,6 +158,7 @@ struct SkyToml {
     strength: Option<Spanned<f64>>,
     rotation: Option<Spanned<f64>>,
     sun: Option<Spanned<SunToml>>,
+    portals: Option<Spanned<Vec<Vec<[f64; 3]>>>>,
 }
 
 #[derive(Deserialize)]
@@ -416,7 +422,18 @@ pub fn parse_toml(text: &str, file: &Path, dir: &Path) -> Result<SceneDesc> {
         if sk.radiance.is_none() && sun.is_none() && environment.is_none() {
             return Err(Error::input(at(sky.span()), "[sky]: give a radiance or an image, a [sky.sun], or both"));
         }
-        desc.sky = Some(super::Sky { radiance, sun, environment });
+        let mut portals = Vec::new();
+        if let Some(list) = &sk.portals {
+            if sk.radiance.is_none() && environment.is_none() {
+                return Err(Error::input(at(list.span()), "[sky]: portals sample the sky's radiance or image, and this sky has neither"));
+            }
+            for (k, corners) in list.get_ref().iter().enumerate() {
+                let portal = super::Portal::new(corners.iter().map(|c| DVec3::from_array(*c)).collect())
+                    .map_err(|e| Error::input(at(list.span()), format!("[sky]: portal {}: {e}", k + 1)))?;
+                portals.push(portal);
+            }
+        }
+        desc.sky = Some(super::Sky { radiance, sun, environment, portals });
     }
     if let Some(th) = &spec.thermal {
         let edges = &th.get_ref().band_edges;
@@ -719,6 +736,29 @@ mod tests {
         assert!(e.to_string().starts_with("s.toml:3:") && e.to_string().contains("non-negative"), "{e}");
         let e = parse("mesh = \"builtin:cornell\"\n[materials.nope]\nemission = [1, 1, 1]\n").unwrap_err();
         assert!(e.to_string().starts_with("s.toml:2:") && e.to_string().contains("green, light, red, white"), "{e}");
+    }
+
+    #[test]
+    fn sky_portals_are_read_and_checked() {
+        let d = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = 1\nportals = [[[0, 2, 0], [1, 2, 0], [1, 2, 1], [0, 2, 1]]]\n").unwrap();
+        let p = &d.sky.unwrap().portals;
+        assert_eq!(p.len(), 1);
+        assert_eq!(p[0].vertices.len(), 4);
+        assert!((p[0].normal.y.abs() - 1.0).abs() < 1e-12);
+        for (bad, why) in [
+            ("[[0, 2, 0], [1, 2, 0], [1, 3, 1], [0, 2, 1]]", "off the plane"),
+            ("[[0, 2, 0], [1, 2, 0]]", "at least 3"),
+            ("[[0, 2, 0], [1, 2, 0], [2, 2, 0]]", "no area"),
+            ("[[0, 2, 0], [2, 2, 1], [0, 2, 2], [0.5, 2, 1]]", "not convex"),
+        ] {
+            let e = parse(&format!("mesh = \"builtin:cornell\"\n[sky]\nradiance = 1\nportals = [{bad}]\n")).unwrap_err().to_string();
+            assert!(e.starts_with("s.toml:4:") && e.contains("portal 1") && e.contains(why), "{bad}: {e}");
+        }
+        // A sun alone has no sky radiance to sample.
+        let e = parse("mesh = \"builtin:cornell\"\n[sky]\nportals = [[[0, 2, 0], [1, 2, 0], [1, 2, 1]]]\n[sky.sun]\ndirection = [0, 1, 0]\nirradiance = 1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("neither"), "{e}");
     }
 
     #[test]
