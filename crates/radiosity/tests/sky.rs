@@ -512,18 +512,21 @@ fn environment_files_load_from_toml_with_clear_errors() {
 /// walls sees only the sky through the opening: `L = ρ·L_sky·F(x → opening)`, exactly (the
 /// contour integral per pixel centre). Rendered without a portal (cosine gather rays find the
 /// sky), with the opening as the portal, with a portal over half of it (the other half left
-/// to the rays) and with a larger one higher up (part of it hidden by the walls): every image
+/// to the rays), with a larger one higher up (part of it hidden by the walls) and with two
+/// that overlap as seen from the floor: every image
 /// matches the closed form on average (within its noise), and the exact portal cuts the
 /// pixels' error to a fraction of the rays' alone.
 #[test]
 fn sky_portals_keep_the_light_and_cut_the_noise() {
     let sq = |x0: f64, x1: f64, y: f64, z0: f64, z1: f64| vec![DVec3::new(x0, y, z0), DVec3::new(x1, y, z0), DVec3::new(x1, y, z1), DVec3::new(x0, y, z1)];
     let opening = sq(0.0, 1.0, 1.0, 0.0, 1.0);
-    let variants: [(&str, Vec<Vec<DVec3>>); 4] = [
+    let variants: [(&str, Vec<Vec<DVec3>>); 5] = [
         ("no portal", vec![]),
         ("the opening", vec![opening.clone()]),
         ("half the opening", vec![sq(0.0, 0.5, 1.0, 0.0, 1.0)]),
         ("larger, higher", vec![sq(-0.5, 1.5, 1.3, -0.5, 1.5)]),
+        // Overlapping as seen from the floor: their shared sky counts once.
+        ("the opening and half of it higher up", vec![opening.clone(), sq(0.0, 0.5, 1.2, 0.0, 1.0)]),
     ];
     let (w, h) = (24, 24);
     let cam = Camera { position: DVec3::new(0.5, 0.95, 0.5), look_at: DVec3::new(0.5, 0.0, 0.5), up: DVec3::Z, vfov_deg: 60.0 };

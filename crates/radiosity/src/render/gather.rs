@@ -179,6 +179,8 @@ pub struct Patterns {
     shadows: Vec<Vec<(f64, f64)>>,
     gather: Vec<(f64, f64)>,
     sun: Vec<(f64, f64)>,
+    /// The sky portals' points (a stream of their own, uncorrelated with the lamps').
+    portal: Vec<(f64, f64)>,
     /// The lamp choice, shared by the positions of one pixel (or texel) on one polygon.
     choice: crate::direct::EmitterChoice,
     cells: Vec<u32>,
@@ -190,8 +192,9 @@ impl<'a> Shader<'a> {
         let sky = scene.lit_sky().filter(|s| s.has_radiance());
         let gather_axis = match indirect {
             Indirect::Gathered { .. } => opts.gather_axis.max(1),
-            // Rays for the sky alone.
-            Indirect::Interpolated(_) if scene.lit_sky().is_some() => SKY_AXIS,
+            // Rays for the sky alone (with portals, for the sky outside them).
+            Indirect::Interpolated(_) if scene.lit_sky().is_some_and(|s| s.portals.is_empty()) => SKY_AXIS,
+            Indirect::Interpolated(_) if scene.lit_sky().is_some() => 2,
             Indirect::Interpolated(_) => 0,
         };
         Shader {
@@ -215,9 +218,7 @@ impl<'a> Shader<'a> {
         use rand::RngExt;
         let base: u64 = rng.random();
         pat.choice.reset();
-        // One shadow pattern per emitter looped over, one shared by sampled emitters and
-        // the portals.
-        let npat = (if self.ems.len() <= LOOP_EMITTERS { self.ems.len() } else { 1 }).max(usize::from(!self.portals.is_empty()));
+        let npat = if self.ems.len() <= LOOP_EMITTERS { self.ems.len() } else { 1 };
         pat.shadows.resize_with(npat, Vec::new);
         for (t, p) in pat.shadows.iter_mut().enumerate() {
             pixel_pattern(side, self.shadow_axis, positions, &mut pattern_rng(base, t as u64 + 2), &mut pat.cells, p);
@@ -227,6 +228,9 @@ impl<'a> Shader<'a> {
         }
         if self.sun.is_some() {
             pixel_pattern(side, self.shadow_axis, positions, &mut pattern_rng(base, 1), &mut pat.cells, &mut pat.sun);
+        }
+        if !self.portals.is_empty() {
+            pixel_pattern(side, self.shadow_axis, positions, &mut pattern_rng(base, u64::MAX), &mut pat.cells, &mut pat.portal);
         }
     }
 
@@ -279,7 +283,7 @@ impl<'a> Shader<'a> {
             nrays += r;
         }
         if let (Some(sky), false) = (self.sky, self.portals.is_empty()) {
-            let pts = &pat.shadows[pat.shadows.len() - 1][k * m2..(k + 1) * m2];
+            let pts = &pat.portal[k * m2..(k + 1) * m2];
             let (h, r) = portal_irradiance(rays, sky, self.portals, p, el.normal, el.patch, pts);
             hd += h;
             nrays += r;
@@ -675,8 +679,8 @@ fn gathered(
 #[inline]
 fn through_portal(portals: &[crate::scene::Portal], p: glam::DVec3, dir: glam::DVec3) -> bool {
     portals.iter().any(|q| {
-        let v = &q.vertices;
-        let (n, den) = (q.normal, q.normal.dot(dir));
+        let v = q.vertices();
+        let (n, den) = (q.normal(), q.normal().dot(dir));
         if den == 0.0 {
             return false;
         }
@@ -702,9 +706,11 @@ fn through_portal(portals: &[crate::scene::Portal], p: glam::DVec3, dir: glam::D
 /// drawn uniformly in the solid angle of the portals' fan triangles (Arvo 1995;
 /// [`crate::sampling::SphericalTriangle`]), a triangle picked in proportion to its solid
 /// angle by the first coordinate of each of the stratified `pts`: `Ω · mean(L V cos θ)`,
-/// `V` whether the ray leaves the scene. Unbiased whatever the portals cover: the gather
-/// rays take the sky seen in every other direction ([`through_portal`]). Returns the
-/// irradiance and the rays cast.
+/// `V` whether the ray leaves the scene. A direction drawn from portal j that also passes
+/// through an earlier portal counts nothing (the earlier one's draws cover it), so portals
+/// that overlap as seen from `p` count their shared sky once. Unbiased whatever the portals
+/// cover: the gather rays take the sky seen in every other direction ([`through_portal`]).
+/// Returns the irradiance and the rays cast.
 fn portal_irradiance(
     rays: &SceneRays,
     sky: &crate::scene::Sky,
@@ -715,11 +721,12 @@ fn portal_irradiance(
     pts: &[(f64, f64)],
 ) -> (Rgb, u64) {
     use crate::sampling::SphericalTriangle;
-    // The fan triangles in front of p's tangent plane, with their solid angles cumulated.
-    let mut tris: Vec<(SphericalTriangle, f64)> = Vec::new();
+    // The fan triangles in front of p's tangent plane, with their solid angles cumulated and
+    // their portal.
+    let mut tris: Vec<(SphericalTriangle, f64, usize)> = Vec::new();
     let mut total = 0.0;
-    for q in portals {
-        let v = &q.vertices;
+    for (j, q) in portals.iter().enumerate() {
+        let v = q.vertices();
         if v.iter().all(|c| n.dot(*c - p) <= 0.0) {
             continue;
         }
@@ -730,7 +737,7 @@ fn portal_irradiance(
             }
             if let Some(t) = SphericalTriangle::new(dirs[0].normalize(), dirs[1].normalize(), dirs[2].normalize()) {
                 total += t.area;
-                tris.push((t, total));
+                tris.push((t, total, j));
             }
         }
     }
@@ -746,7 +753,7 @@ fn portal_irradiance(
         let uu = ((t - lo) / tris[i].0.area).clamp(0.0, 1.0 - 1e-12);
         let d = tris[i].0.sample(uu, w);
         let c = n.dot(d);
-        if c <= 0.0 {
+        if c <= 0.0 || through_portal(&portals[..tris[i].2], p, d) {
             continue;
         }
         nrays += 1;

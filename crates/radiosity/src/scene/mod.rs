@@ -258,10 +258,8 @@ pub struct Sky {
 /// changes the noise, not the answer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Portal {
-    /// Corners, in order.
-    pub vertices: Vec<DVec3>,
-    /// Unit normal (either side).
-    pub normal: DVec3,
+    vertices: Vec<DVec3>,
+    normal: DVec3,
 }
 
 impl Portal {
@@ -283,14 +281,26 @@ impl Portal {
         if let Some(v) = vertices.iter().find(|v| n.dot(**v - vertices[0]).abs() > 1e-6 * size) {
             return Err(format!("corner {:?} is off the plane of the others", v.to_array()));
         }
+        // Convex and simple: every corner on the inner side of every edge (turning the same
+        // way at every corner alone lets a star through).
         let m = vertices.len();
         for k in 0..m {
-            let (a, b, c) = (vertices[k], vertices[(k + 1) % m], vertices[(k + 2) % m]);
-            if n.dot((b - a).cross(c - b)) < -1e-9 * size * size {
+            let (a, b) = (vertices[k], vertices[(k + 1) % m]);
+            if vertices.iter().any(|c| n.dot((b - a).cross(*c - a)) < -1e-9 * size * size) {
                 return Err("it is not convex (give its corners in order around it, or split it)".into());
             }
         }
         Ok(Portal { vertices, normal: n })
+    }
+
+    /// Corners, in order (at least three, convex, planar).
+    pub fn vertices(&self) -> &[DVec3] {
+        &self.vertices
+    }
+
+    /// Unit normal (by the corners' order).
+    pub fn normal(&self) -> DVec3 {
+        self.normal
     }
 }
 

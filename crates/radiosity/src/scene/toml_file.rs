@@ -36,10 +36,9 @@
 //! # strength = 1.0             # multiplies the image's texels
 //! # rotation = 0.0             # degrees about +Y (counter-clockwise from above)
 //! # portals = [[[0, 3, 0], [4, 3, 0], [4, 3, 2], [0, 3, 2]]]
-//! #                            # openings (convex planar polygons, not overlapping as
-//! #                            # seen from inside) through which the final gather samples
-//! #                            # the sky directly (see scene::Portal): less noise, the
-//! #                            # same light
+//! #                            # openings (convex planar polygons) through which the
+//! #                            # final gather samples the sky directly (see
+//! #                            # scene::Portal): less noise, the same light
 //! [sky.sun]                    # optional: a sun (with or without a sky radiance)
 //! direction = [0.3, 1, 0.2]    # towards the sun (normalised)
 //! irradiance = 1000            # on a surface facing it, unshadowed (exitance units)
@@ -743,13 +742,15 @@ mod tests {
         let d = parse("mesh = \"builtin:cornell\"\n[sky]\nradiance = 1\nportals = [[[0, 2, 0], [1, 2, 0], [1, 2, 1], [0, 2, 1]]]\n").unwrap();
         let p = &d.sky.unwrap().portals;
         assert_eq!(p.len(), 1);
-        assert_eq!(p[0].vertices.len(), 4);
-        assert!((p[0].normal.y.abs() - 1.0).abs() < 1e-12);
+        assert_eq!(p[0].vertices().len(), 4);
+        assert!((p[0].normal().y.abs() - 1.0).abs() < 1e-12);
         for (bad, why) in [
             ("[[0, 2, 0], [1, 2, 0], [1, 3, 1], [0, 2, 1]]", "off the plane"),
             ("[[0, 2, 0], [1, 2, 0]]", "at least 3"),
             ("[[0, 2, 0], [1, 2, 0], [2, 2, 0]]", "no area"),
             ("[[0, 2, 0], [2, 2, 1], [0, 2, 2], [0.5, 2, 1]]", "not convex"),
+            // A star turns the same way at every corner.
+            ("[[0, 2, 1], [0.59, 2, -0.81], [-0.95, 2, 0.31], [0.95, 2, 0.31], [-0.59, 2, -0.81]]", "not convex"),
         ] {
             let e = parse(&format!("mesh = \"builtin:cornell\"\n[sky]\nradiance = 1\nportals = [{bad}]\n")).unwrap_err().to_string();
             assert!(e.starts_with("s.toml:4:") && e.contains("portal 1") && e.contains(why), "{bad}: {e}");

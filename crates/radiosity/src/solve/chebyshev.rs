@@ -17,12 +17,16 @@
 //!
 //! whose error shrinks by `β / (1 + √(1 − β²))` per sweep (0.36 for β = 0.63, 0.63 for
 //! β = 0.9): the same one product `F·B` per sweep as Jacobi, about half the sweeps or
-//! fewer. Any `β < 1` converges for real eigenvalues in (−1, 1); an estimate near the true
-//! radius converges fastest. `β` is not known beforehand: the first sweeps are plain Jacobi,
+//! fewer. For real eigenvalues in (−1, 1) any `β < 1` converges, an estimate near the true
+//! radius fastest. Point-sampled rows and the hierarchical operator are only nearly
+//! reciprocal, so their eigenvalues may leave the real axis a little: a residual that
+//! rises under the recurrence restarts it from the current iterate, and after
+//! [`RESTARTS`] restarts the solve goes on as plain Jacobi. `β` is not known beforehand: the first sweeps are plain Jacobi,
 //! whose residual ratio tends to `β` (the power method), per colour channel; once the ratio
 //! settles ([`SETTLED`], after at least [`ESTIMATE_MIN`] sweeps, at most [`ESTIMATE_MAX`]) the
 //! recurrence starts with `β` a little above it ([`MARGIN`]). Iterates are kept
-//! non-negative (the solution is), a projection that cannot slow convergence.
+//! non-negative and below the physical bound (the solution is), never below the Jacobi
+//! value of the sweep.
 //!
 //! Unlike Jacobi's, whose iterates approach the solution from below, an iterate may
 //! overshoot it slightly: the energy balance's "unshot" (what the next Jacobi step would
@@ -52,6 +56,10 @@ pub const SETTLED: f64 = 0.03;
 /// a `β` below the true radius slows the recurrence more than one above it.
 pub const MARGIN: f64 = 0.1;
 
+/// Restarts of the recurrence (after a rising residual) before the solve goes on as plain
+/// Jacobi.
+pub const RESTARTS: usize = 3;
+
 /// Per-channel power residual `Σ A_i |E_i + ρ_i (F·B)_i − B_i|`.
 fn channel_residual(sys: &System, b: &[Rgb], fb: &[Rgb]) -> Rgb {
     let mut r = Rgb::ZERO;
@@ -72,6 +80,8 @@ pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
     let mut ratio: Option<Rgb> = None;
     // Once started: β² per channel, the last ω, and the recurrence's step.
     let mut cheb: Option<(Rgb, Rgb, usize)> = None;
+    // The last residual, and the restarts so far (see RESTARTS).
+    let (mut last_residual, mut restarts) = (f64::INFINITY, 0);
     // The solution lies below the physical bound (see `Monitor::bound`); an extrapolated
     // iterate that overshoots it is held there (a projection onto a set that holds the
     // solution; in the furnace the solution is the bound).
@@ -87,7 +97,22 @@ pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
         if let Some(stop) = mon.check(it, residual) {
             break (stop, residual);
         }
-        if cheb.is_none() {
+        // A residual that rises under the recurrence (eigenvalues off the real interval
+        // the recurrence assumes, or a clamp that broke it): start it again from this
+        // iterate, and after RESTARTS of them go on as plain Jacobi.
+        if let Some((_, _, step)) = &mut cheb {
+            if *step > 0 && residual > last_residual {
+                restarts += 1;
+                *step = 0;
+            }
+        }
+        if restarts > RESTARTS {
+            cheb = None;
+            last = None;
+            ratio = None;
+        }
+        last_residual = residual;
+        if cheb.is_none() && restarts <= RESTARTS {
             let r = channel_residual(sys, &b, &fb);
             if let Some(l) = last {
                 // Channels with nothing left to converge read the largest ratio of the others.

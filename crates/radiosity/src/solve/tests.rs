@@ -294,6 +294,25 @@ fn chebyshev_needs_fewer_sweeps_than_jacobi() {
     }
 }
 
+/// A cycle of three elements (each sees only the next) has complex eigenvalues
+/// `0.9·e^{±2πi/3}`, off the real interval Chebyshev's recurrence assumes: the residual
+/// rises under it, the recurrence restarts and falls back to Jacobi, and the solve still
+/// reaches the direct solution, never reported as diverging.
+#[test]
+fn chebyshev_falls_back_to_jacobi_where_the_spectrum_is_complex() {
+    let rows = SparseRows::from_rows(vec![vec![(1, 1.0)], vec![(2, 1.0)], vec![(0, 1.0)]]);
+    let rho = vec![Rgb::splat(0.9); 3];
+    let e = vec![Rgb::ONE, Rgb::ZERO, Rgb::ZERO];
+    let area = vec![1.0; 3];
+    let sys = System { transport: &rows, reflectance: &rho, emission: &e, area: &area };
+    let direct = solve(Solver::Direct, &sys, &tight(), &NoProgress).unwrap();
+    let c = solve(Solver::Chebyshev, &sys, &Options { tolerance: 1e-10, ..tight() }, &NoProgress).unwrap();
+    assert_eq!(c.stats.stop, StopReason::Converged);
+    let d = max_relative_difference(&c.radiosity, &direct.radiosity);
+    eprintln!("3-cycle: Chebyshev {} sweeps, max relative difference from direct {d:.2e}", c.stats.iterations);
+    assert!(d <= 1e-8, "{d:e}");
+}
+
 #[test]
 fn shooting_conserves_power() {
     let f = cornell();
