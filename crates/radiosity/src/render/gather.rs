@@ -181,6 +181,8 @@ pub struct Patterns {
     sun: Vec<(f64, f64)>,
     /// The sky portals' points (a stream of their own, uncorrelated with the lamps').
     portal: Vec<(f64, f64)>,
+    /// Scratch for `portal_irradiance`: the portals' spherical triangles at one position.
+    portal_tris: Vec<PortalTriangle>,
     /// The lamp choice, shared by the positions of one pixel (or texel) on one polygon.
     choice: crate::direct::EmitterChoice,
     cells: Vec<u32>,
@@ -284,7 +286,7 @@ impl<'a> Shader<'a> {
         }
         if let (Some(sky), false) = (self.sky, self.portals.is_empty()) {
             let pts = &pat.portal[k * m2..(k + 1) * m2];
-            let (h, r) = portal_irradiance(rays, sky, self.portals, p, el.normal, el.patch, pts);
+            let (h, r) = portal_irradiance(rays, sky, self.portals, p, el.normal, el.patch, pts, &mut pat.portal_tris);
             hd += h;
             nrays += r;
         }
@@ -675,12 +677,16 @@ fn gathered(
     sum * (1.0 / dirs.len() as f64)
 }
 
+/// A portal's fan triangle seen from one position: the spherical triangle, the solid angle
+/// of the triangles up to and including it, and its portal's index.
+type PortalTriangle = (crate::sampling::SphericalTriangle, f64, usize);
+
 /// Whether the ray `p + t·dir` (t > 0) passes through one of `portals`.
 #[inline]
 fn through_portal(portals: &[crate::scene::Portal], p: glam::DVec3, dir: glam::DVec3) -> bool {
     portals.iter().any(|q| {
-        let v = q.vertices();
-        let (n, den) = (q.normal(), q.normal().dot(dir));
+        let (v, n) = (q.vertices(), q.normal());
+        let den = n.dot(dir);
         if den == 0.0 {
             return false;
         }
@@ -710,7 +716,9 @@ fn through_portal(portals: &[crate::scene::Portal], p: glam::DVec3, dir: glam::D
 /// through an earlier portal counts nothing (the earlier one's draws cover it), so portals
 /// that overlap as seen from `p` count their shared sky once. Unbiased whatever the portals
 /// cover: the gather rays take the sky seen in every other direction ([`through_portal`]).
-/// Returns the irradiance and the rays cast.
+/// Returns the irradiance and the rays cast; `tris` is scratch (kept to spare an allocation
+/// per position).
+#[allow(clippy::too_many_arguments)]
 fn portal_irradiance(
     rays: &SceneRays,
     sky: &crate::scene::Sky,
@@ -719,11 +727,12 @@ fn portal_irradiance(
     n: glam::DVec3,
     patch: u32,
     pts: &[(f64, f64)],
+    tris: &mut Vec<PortalTriangle>,
 ) -> (Rgb, u64) {
     use crate::sampling::SphericalTriangle;
     // The fan triangles in front of p's tangent plane, with their solid angles cumulated and
     // their portal.
-    let mut tris: Vec<(SphericalTriangle, f64, usize)> = Vec::new();
+    tris.clear();
     let mut total = 0.0;
     for (j, q) in portals.iter().enumerate() {
         let v = q.vertices();

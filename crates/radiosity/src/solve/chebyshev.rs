@@ -37,9 +37,7 @@
 //! updates `B` also gives the residual of the current iterate, as in Jacobi. Needs only
 //! [`Transport::gather`](crate::transport::Transport::gather), so it runs on any operator.
 
-use std::borrow::Cow;
-
-use super::{energy_gathering, Monitor, Solution, System};
+use super::{energy_gathering, gather_sweep, Monitor, Solution, System};
 use crate::{Result, Rgb};
 
 /// Plain Jacobi sweeps before the spectral radius may be read from the residual ratio.
@@ -87,14 +85,8 @@ pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
     // solution; in the furnace the solution is the bound).
     let cap = Rgb::splat(if mon.bound.is_finite() { mon.bound } else { f64::INFINITY });
     let (stop, residual) = loop {
-        sys.transport.gather(&b, &mut fb);
-        let residual = sys.residual_with(&b, &fb);
-        mon.watch(residual, Some(&b))?;
-        if it > 0 {
-            mon.record(it, it as f64, residual);
-            mon.observe(it, residual, || Cow::Borrowed(&b));
-        }
-        if let Some(stop) = mon.check(it, residual) {
+        let (residual, stop) = gather_sweep(sys, mon, it, &b, &mut fb)?;
+        if let Some(stop) = stop {
             break (stop, residual);
         }
         // A residual that rises under the recurrence (eigenvalues off the real interval

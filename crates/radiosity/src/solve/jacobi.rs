@@ -6,9 +6,7 @@
 //! [`Transport::gather`](crate::transport::Transport::gather), so it runs on any operator;
 //! the product that updates B also gives the residual of the current iterate.
 
-use std::borrow::Cow;
-
-use super::{energy_gathering, Monitor, Solution, System};
+use super::{energy_gathering, gather_sweep, Monitor, Solution, System};
 use crate::{Result, Rgb};
 
 pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
@@ -17,15 +15,9 @@ pub(super) fn solve(sys: &System, mon: &mut Monitor) -> Result<Solution> {
     let mut fb = vec![Rgb::ZERO; n];
     let mut it = 0;
     let (stop, residual) = loop {
-        sys.transport.gather(&b, &mut fb);
         // The residual of the current iterate B⁽ⁱᵗ⁾, from the same product.
-        let residual = sys.residual_with(&b, &fb);
-        mon.watch(residual, Some(&b))?;
-        if it > 0 {
-            mon.record(it, it as f64, residual);
-            mon.observe(it, residual, || Cow::Borrowed(&b));
-        }
-        if let Some(stop) = mon.check(it, residual) {
+        let (residual, stop) = gather_sweep(sys, mon, it, &b, &mut fb)?;
+        if let Some(stop) = stop {
             break (stop, residual);
         }
         for i in 0..n {

@@ -398,6 +398,21 @@ pub fn solve_observed(
 /// the residual is also above twice its lowest value).
 pub const RISING_LIMIT: usize = 5;
 
+/// One gathering sweep's product and bookkeeping, shared by Jacobi and Chebyshev:
+/// `fb = F·b`, the residual of `b` from it, watched by the divergence guard, recorded and
+/// observed (from the first iteration on) and checked against the stopping rules.
+/// Returns the residual and why to stop, if so.
+fn gather_sweep(sys: &System, mon: &mut Monitor, it: usize, b: &[Rgb], fb: &mut [Rgb]) -> Result<(f64, Option<StopReason>)> {
+    sys.transport.gather(b, fb);
+    let residual = sys.residual_with(b, fb);
+    mon.watch(residual, Some(b))?;
+    if it > 0 {
+        mon.record(it, it as f64, residual);
+        mon.observe(it, residual, || Cow::Borrowed(b));
+    }
+    Ok((residual, mon.check(it, residual)))
+}
+
 /// Checks that the system's inputs are finite and physical.
 fn check_inputs(sys: &System) -> Result<()> {
     let bad = |what: &str, i: usize, v: String| {
