@@ -773,7 +773,14 @@ pub struct Hierarchy {
     pub tree: Tree,
     /// Links of receiver node `k`: `link_start[k] .. link_start[k+1]`.
     link_start: Vec<u32>,
+    /// Each link's source as a *slot*: an index into `slot_node`, the nodes that some
+    /// link or exclusion reads, in node order. A product reads its sources from a table
+    /// of readings per slot ([`Reading`]), compact where the nodes are many and the
+    /// sources few (Sponza: 494 127 nodes; every link's source among a few thousand).
     link_src: Vec<u32>,
+    slot_node: Vec<u32>,
+    /// The slot of each exclusion's source.
+    ex_slot: Vec<u32>,
     link_f: Vec<f32>,
     /// The vectors of the links of non-leaf receivers (gradient, or a cluster receiver's
     /// direction): node `k`'s at `g_base[k] ..` in its link order; [`NONE`] for leaves,
@@ -788,6 +795,10 @@ pub struct Hierarchy {
     /// Per element: scale applied to what its links bring, fitting the row to the measured
     /// closure (1 without one; see [`Hierarchy::from_parts`]).
     link_scale: Vec<f32>,
+    /// Per element: what its links bring for `x = 1` before any scale (no direct columns,
+    /// no traced row). The closure fit and every row sum are read from it: one product
+    /// instead of five on a large scene (each a walk over every link).
+    link_ones: Vec<f64>,
     /// The closure the links were fitted to, kept to fit them again without the elements
     /// whose rows are traced ([`Hierarchy::set_ray_rows`]).
     closure: Option<Closure>,
@@ -817,6 +828,10 @@ pub struct Hierarchy {
 /// room's solve in `perf`); kept between products they are written in place.
 #[derive(Default)]
 struct Buffers {
+    /// Readings per source slot (see `Hierarchy::link_src`): over all faces, and over
+    /// the exposed ones.
+    near: Vec<Reading>,
+    far: Vec<Reading>,
     mean: Vec<Rgb>,
     nb: Vec<[DVec3; 3]>,
     nbx: Vec<[DVec3; 3]>,
@@ -852,15 +867,24 @@ const PREFETCH_AHEAD: usize = 16;
 /// Elements below which [`Hierarchy::walk_clusters`] stays on one thread.
 const PARALLEL_WALK: usize = 4096;
 
-/// What links read from their sources during one product (pulled per node).
+/// What a link reads of its source during one product: the source's mean radiosity, its
+/// `Σ A_j B_j n_j` per channel and the largest radiosity below it. Over all its faces
+/// (near links) or, for far links, over its exposed faces: mean `Σ A_j o_j B_j / Σ A_j
+/// o_j`, `Σ A_j o_j B_j n_j`. Two cache lines, one table per kind, one entry per source
+/// slot: the reads of a product stay within a small table instead of five arrays over
+/// every node.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(64))]
+struct Reading {
+    mean: Rgb,
+    n: [DVec3; 3],
+    hi: Rgb,
+}
+
+/// What links read from their sources during one product, per source slot.
 struct Sources<'a> {
-    mean: &'a [Rgb],
-    /// `Σ A_j o_j B_j`, the exposed sum (a cluster is read through its exposed faces).
-    sx: &'a [Rgb],
-    nb: &'a [[DVec3; 3]],
-    /// `Σ A_j o_j B_j n_j` (far links' directional readings; `nb` is `Σ A_j B_j n_j`).
-    nbx: &'a [[DVec3; 3]],
-    hi: &'a [Rgb],
+    near: &'a [Reading],
+    far: &'a [Reading],
 }
 
 impl Hierarchy {
@@ -948,6 +972,24 @@ impl Hierarchy {
             }
             *part = Vec::new();
         }
+        // Sources to slots (see `link_src`), exclusions' sources included.
+        let mut slot_of = vec![NONE; m];
+        for &sn in &link_src {
+            slot_of[sn as usize] = 0;
+        }
+        for e in &exclusions {
+            slot_of[e.s as usize] = 0;
+        }
+        let mut slot_node = Vec::new();
+        for (k, sl) in slot_of.iter_mut().enumerate() {
+            if *sl != NONE {
+                *sl = slot_node.len() as u32;
+                slot_node.push(k as u32);
+            }
+        }
+        for sn in link_src.iter_mut() {
+            *sn = slot_of[*sn as usize];
+        }
         stats.links = total as u64;
         stats.nodes = m as u64;
         stats.surface_nodes = tree.nodes.iter().filter(|n| n.surface).count() as u64;
@@ -956,6 +998,8 @@ impl Hierarchy {
             tree,
             link_start,
             link_src,
+            slot_node,
+            ex_slot: Vec::new(),
             link_f,
             link_g,
             g_base,
@@ -963,6 +1007,7 @@ impl Hierarchy {
             dir_base,
             cluster_count,
             link_scale: vec![1.0; n],
+            link_ones: Vec::new(),
             closure: None,
             scale: vec![1.0; n],
             fixed_scale: vec![1.0; n],
@@ -976,7 +1021,14 @@ impl Hierarchy {
             stats,
             buffers: BufferCell::default(),
         };
+        h.ex_slot = h.exclusions.iter().map(|e| slot_of[e.s as usize]).collect();
+        drop(slot_of);
         h.stats.direct_entries = h.direct.as_ref().map_or(0, |d| d.nnz() as u64);
+        // Every scale is still 1 and no row is traced: the links alone.
+        let ones = vec![Rgb::ONE; n];
+        let mut y = vec![Rgb::ZERO; n];
+        h.apply(&ones, &mut y, false, false);
+        h.link_ones = y.iter().map(|v| v.x).collect();
         if let Some(c) = closure {
             h.fit_closure(&c, &[]);
             h.closure = Some(c);
@@ -1082,9 +1134,7 @@ impl Hierarchy {
     /// leaving out of the groups the elements marked in `traced` (their rows are traced).
     fn fit_closure(&mut self, c: &Closure, traced: &[bool]) {
         let n = self.len();
-        let ones = vec![Rgb::ONE; n];
-        let mut links = vec![Rgb::ZERO; n];
-        self.apply(&ones, &mut links, false, false);
+        let links = &self.link_ones;
         // Per group: area, Σ A·links, Σ A·direct, Σ A·closure, rays.
         let groups = c.group.iter().copied().max().map_or(0, |g| g as usize + 1);
         let is_traced = |i: usize| traced.get(i).copied().unwrap_or(false);
@@ -1097,7 +1147,7 @@ impl Hierarchy {
             let d = self.direct.as_ref().map_or(0.0, |d| d.row_sum(i));
             let g = &mut acc[c.group[i] as usize];
             g.0 += a;
-            g.1 += a * links[i].x;
+            g.1 += a * links[i];
             g.2 += a * d;
             g.3 += a * c.fraction[i] as f64;
             g.4 += c.rays as u64;
@@ -1130,13 +1180,13 @@ impl Hierarchy {
             // 0.61). Fitted to the expected closure under the two (see CLOSED_PRIOR), not
             // to one: fitting all of them to one created light.
             let d = self.direct.as_ref().map_or(0.0, |d| d.row_sum(i));
-            let s = if c.fraction[i] == 1.0 && a > 0.0 && links[i].x > 0.0 {
+            let s = if c.fraction[i] == 1.0 && a > 0.0 && links[i] > 0.0 {
                 let gi = &acc[c.group[i] as usize];
                 let pooled = if gi.0 > 0.0 { gi.3 / gi.0 } else { 1.0 };
                 let typical = pooled.powf(c.rays as f64);
                 let closed = CLOSED_PRIOR / (CLOSED_PRIOR + (1.0 - CLOSED_PRIOR) * typical);
                 let t = pooled + (1.0 - pooled) * closed;
-                ((t - d).max(0.0) / links[i].x).clamp(CLOSURE_SCALE.0, CLOSURE_SCALE.1)
+                ((t - d).max(0.0) / links[i]).clamp(CLOSURE_SCALE.0, CLOSURE_SCALE.1)
             } else {
                 scale[c.group[i] as usize]
             };
@@ -1164,10 +1214,14 @@ impl Hierarchy {
 
     /// Every element's raw row sum `Σ_j F_ij` (before the guard's scaling).
     pub fn row_sums(&self) -> Vec<f64> {
-        let ones = vec![Rgb::ONE; self.len()];
-        let mut y = vec![Rgb::ZERO; self.len()];
-        self.apply(&ones, &mut y, false, true);
-        y.iter().map(|v| v.x).collect()
+        // The product with x = 1, from the links' own (see `link_ones`).
+        (0..self.len())
+            .map(|e| {
+                self.link_ones[e] * self.link_scale[e] as f64
+                    + self.direct.as_ref().map_or(0.0, |d| d.row_sum(e))
+                    + self.ray_rows.as_ref().map_or(0.0, |r| r.row_sum(e))
+            })
+            .collect()
     }
 
     /// Pull – gather – push (see the module docs); `direct` adds the direct columns and
@@ -1176,7 +1230,7 @@ impl Hierarchy {
         let nodes = &self.tree.nodes;
         let m = nodes.len();
         let mut buf = self.buffers.0.lock().ok().and_then(|mut b| b.take()).unwrap_or_default();
-        let Buffers { mean, nb, nbx, sx, hi, g } = &mut buf;
+        let Buffers { near, far, mean, nb, nbx, sx, hi, g } = &mut buf;
         // Pull: area-weighted means and N_B = Σ A B n (per channel), bottom-up (every
         // entry is written below, so the kept buffers need no clearing).
         mean.resize(m, Rgb::ZERO);
@@ -1217,7 +1271,17 @@ impl Hierarchy {
         // `s + L·n + nᵀQn` per channel (s in the scalar, L in the gradient slots, Q here).
         g.clear();
         g.resize(m, (Rgb::ZERO, [DVec3::ZERO; 3]));
-        let src = Sources { mean, sx, nb, nbx, hi };
+        // The sources' readings (see [`Reading`]).
+        let slots = self.slot_node.len();
+        near.resize(slots, Reading::default());
+        far.resize(slots, Reading::default());
+        near.par_iter_mut().zip(far.par_iter_mut()).zip(&self.slot_node).with_min_len(1024).for_each(|((rn, rf), &k)| {
+            let k = k as usize;
+            *rn = Reading { mean: mean[k], n: nb[k], hi: hi[k] };
+            let ax = nodes[k].area_x as f64;
+            *rf = if ax > 0.0 { Reading { mean: sx[k] / ax, n: nbx[k], hi: hi[k] } } else { *rn };
+        });
+        let src = Sources { near, far };
         g.par_iter_mut().enumerate().with_min_len(256).for_each(|(k, gk)| {
             if !nodes[k].surface {
                 return; // cluster receivers below
@@ -1249,13 +1313,14 @@ impl Hierarchy {
             let mut lit = Vec::new();
             self.walk_clusters(0, &mut bins, &mut [0; 3], &src, &mut lit);
             let ex = &self.exclusions;
+            let exs = &self.ex_slot;
             for (c, v) in lit {
                 // Less what the walk handed the face from sources it cannot see (exclusions
                 // sorted by face), clamped on the walk's own value: the face's other links
                 // stay whole.
                 let first = ex.partition_point(|e| e.c < c);
-                let taken = ex[first..].iter().take_while(|e| e.c == c).fold(Rgb::ZERO, |t, e| {
-                    t + self.read_source(e.s as usize, e.dir, e.near, &src) * e.coef as f64
+                let taken = ex[first..].iter().zip(&exs[first..]).take_while(|(e, _)| e.c == c).fold(Rgb::ZERO, |t, (e, &sl)| {
+                    t + self.read_source(sl as usize, e.dir, e.near, &src) * e.coef as f64
                 });
                 g[c as usize].0 += (v - taken).max(Rgb::ZERO);
             }
@@ -1287,7 +1352,7 @@ impl Hierarchy {
         // and normal-dependent pushes extrapolate, so rows that sum to one can still
         // amplify a non-uniform `x` slightly; with the cap ‖F·x‖∞ ≤ ‖x‖∞ holds and
         // Jacobi stays below E/(1 − ρ)).
-        let top = hi.first().copied().unwrap_or(Rgb::ZERO);
+        let top = buf.hi.first().copied().unwrap_or(Rgb::ZERO);
         y.par_iter_mut().enumerate().with_min_len(256).for_each(|(e, ye)| {
             *ye *= self.link_scale[e] as f64 * if guard { self.scale[e] as f64 } else { 1.0 };
             let mut fixed = Rgb::ZERO;
@@ -1322,8 +1387,11 @@ impl Hierarchy {
         let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
         // The bins this node's links change, with their old values (restored exactly), and
         // the marks it sets (cleared on return).
-        let mut saved: Vec<(usize, [DVec3; 3])> = Vec::with_capacity(b - a);
+        let mut saved: Vec<(usize, [DVec3; 3])> = Vec::new();
         let mut marked = [0u64; 3];
+        // Bins saved at this node: each once, before its first change here (a cluster's
+        // links are many and their bins few; saving per link wrote 80 bytes a link).
+        let mut kept = [0u64; 3];
         for t in a..b {
             if t + PREFETCH_AHEAD < b {
                 self.prefetch_source(k, t + PREFETCH_AHEAD, src);
@@ -1332,11 +1400,14 @@ impl Hierarchy {
             let d = Vec3::from_array(self.vec_of(k, t)).as_dvec3();
             // Near links in the second half: they reach every face, far ones the exposed.
             let bin = dir_bin(d) + DIR_BINS * self.is_near(t) as usize;
-            saved.push((bin, bins[bin]));
+            let (word, bit) = (bin / 64, 1u64 << (bin % 64));
+            if kept[word] & bit == 0 {
+                kept[word] |= bit;
+                saved.push((bin, bins[bin]));
+            }
             for c in 0..3 {
                 bins[bin][c] += d * w[c];
             }
-            let (word, bit) = (bin / 64, 1u64 << (bin % 64));
             if used[word] & bit == 0 {
                 used[word] |= bit;
                 marked[word] |= bit;
@@ -1399,18 +1470,23 @@ impl Hierarchy {
     fn prefetch_source(&self, k: usize, t: usize, src: &Sources) {
         use crate::accel::prefetch;
         let s = self.link_src[t] as usize;
-        prefetch(&src.mean[s]);
-        if t >= self.first_cluster_link(k) {
-            // A cluster source: read by direction (`Link::MEAN` links are surface sources).
-            prefetch(&self.tree.nodes[s].area_x);
-            prefetch(&src.hi[s]);
-            if self.is_near(t) {
-                prefetch(&src.nb[s]);
-            } else {
-                prefetch(&src.sx[s]);
-                prefetch(&src.nbx[s]);
-            }
+        if t >= self.first_cluster_link(k) && !self.is_near(t) {
+            // A far cluster source: read by direction over its exposed faces (surface
+            // sources, `Link::MEAN`, read the mean).
+            let r = &src.far[s];
+            prefetch(r);
+            prefetch(&r.hi);
+        } else {
+            let r = &src.near[s];
+            prefetch(r);
+            prefetch(&r.hi);
         }
+    }
+
+    /// The source node of link `t`.
+    #[inline]
+    fn source_node(&self, t: usize) -> u32 {
+        self.slot_node[self.link_src[t] as usize]
     }
 
     /// The factor of link `t`.
@@ -1459,28 +1535,22 @@ impl Hierarchy {
         self.read_source(self.link_src[t] as usize, self.read_of(k, t), self.is_near(t), src)
     }
 
-    /// Source `s` read as `dir` says ([`Link::MEAN`] or [`Link::directional`]), over all its
-    /// faces (`near`) or its exposed ones.
+    /// The source in slot `s` read as `dir` says ([`Link::MEAN`] or
+    /// [`Link::directional`]), over all its faces (`near`) or its exposed ones.
     #[inline]
     fn read_source(&self, s: usize, dir: [f32; 4], near: bool, src: &Sources) -> Rgb {
-        let hi = src.hi;
         if dir == Link::MEAN {
-            src.mean[s]
+            src.near[s].mean
         } else {
-            let ax = self.tree.nodes[s].area_x as f64;
-            let (mean, nb) = if near || !(ax > 0.0) {
-                (src.mean[s], src.nb)
-            } else {
-                (src.sx[s] / ax, src.nbx)
-            };
+            let r = if near { &src.near[s] } else { &src.far[s] };
+            let (mean, n, hi) = (r.mean, &r.n, r.hi);
             let beta = Vec3::new(dir[1], dir[2], dir[3]).as_dvec3();
-            let n = &nb[s];
             // A weighted mean of the source's radiosities in truth; the first-order reading
             // can overshoot (normals that cancel, as on two-sided pairs) and is held to
             // the range they span, so that no link amplifies.
             (mean * dir[0] as f64 + Rgb::new(beta.dot(n[0]), beta.dot(n[1]), beta.dot(n[2])))
                 .max(Rgb::ZERO)
-                .min(hi[s])
+                .min(hi)
         }
     }
 
@@ -1527,7 +1597,7 @@ impl Hierarchy {
         for k in 0..nodes.len() {
             let (a, b) = (self.link_start[k] as usize, self.link_start[k + 1] as usize);
             for t in a..b {
-                let src = self.leaf_reading(x, self.link_src[t] as usize, self.read_of(k, t), self.is_near(t));
+                let src = self.leaf_reading(x, self.source_node(t) as usize, self.read_of(k, t), self.is_near(t));
                 let w = self.factor(t) * crate::luminance(src);
                 if nodes[k].surface {
                     total += nodes[k].area as f64 * w;
@@ -1576,13 +1646,13 @@ impl Hierarchy {
     pub fn links_full(&self, k: u32) -> impl Iterator<Item = (u32, f32, [f32; 3], [f32; 4])> + '_ {
         let k = k as usize;
         (self.link_start[k] as usize..self.link_start[k + 1] as usize)
-            .map(move |t| (self.link_src[t], self.link_f[t].abs(), self.vec_of(k, t), self.read_of(k, t)))
+            .map(move |t| (self.source_node(t), self.link_f[t].abs(), self.vec_of(k, t), self.read_of(k, t)))
     }
 
     /// Links received by node `k`: (source node, factor).
     pub fn links(&self, k: u32) -> impl Iterator<Item = (u32, f32)> + '_ {
         let (a, b) = (self.link_start[k as usize] as usize, self.link_start[k as usize + 1] as usize);
-        self.link_src[a..b].iter().copied().zip(self.link_f[a..b].iter().map(|f| f.abs()))
+        self.link_src[a..b].iter().map(|&sl| self.slot_node[sl as usize]).zip(self.link_f[a..b].iter().map(|f| f.abs()))
     }
 }
 
@@ -1611,7 +1681,8 @@ impl Transport for Hierarchy {
             + t.top_range.len() * 8
             + t.top_id.len() * 4
             + self.link_start.len() * 4
-            + self.link_src.len() * 4
+            + (self.link_src.len() + self.slot_node.len() + self.ex_slot.len()) * 4
+            + self.link_ones.len() * 8
             + self.link_f.len() * 4
             + self.link_g.len() * 12
             + self.link_dir.len() * 16
