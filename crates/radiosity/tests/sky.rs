@@ -563,3 +563,95 @@ fn sky_portals_keep_the_light_and_cut_the_noise() {
     }
     assert!(rms[1] < 0.25 * rms[0], "the opening as a portal: RMS {:.4} against {:.4} without", rms[1], rms[0]);
 }
+
+/// The element exposure (the sky's first reflection in the solve) through portals: the
+/// floor of an open box with black walls sees the sky through the opening only, so each
+/// floor element's exposure is the mean over it of the point-to-opening factor. Through a
+/// portal on the opening the element's mean is unbiased and its noise far lower at fewer
+/// rays; portals over part of the opening, beside it or overlapping keep it unbiased.
+#[test]
+fn element_exposure_through_portals_matches_the_opening() {
+    use radiosity::accel::SceneRays;
+    use radiosity::mesh::Receivers;
+    let sq = |x0: f64, x1: f64, y: f64, z0: f64, z1: f64| vec![DVec3::new(x0, y, z0), DVec3::new(x1, y, z0), DVec3::new(x1, y, z1), DVec3::new(x0, y, z1)];
+    let opening = sq(0.0, 1.0, 1.0, 0.0, 1.0);
+    let variants: [(&str, Vec<Vec<DVec3>>); 5] = [
+        ("no portal", vec![]),
+        ("the opening", vec![opening.clone()]),
+        ("half the opening", vec![sq(0.0, 0.5, 1.0, 0.0, 1.0)]),
+        ("larger, higher", vec![sq(-0.5, 1.5, 1.3, -0.5, 1.5)]),
+        ("the opening and half of it higher up", vec![opening.clone(), sq(0.0, 0.5, 1.2, 0.0, 1.0)]),
+    ];
+    let scene = open_box(1.0, 0.0, None, Some(1.0));
+    let mesh = radiosity::mesh::mesh_uniform(&scene, 0.1);
+    let rays = SceneRays::new(&scene.polygons);
+    let rec = Receivers::compute(&scene, &mesh, &rays);
+    // Floor elements and their exact exposure (a 6 × 6 grid of point factors over each).
+    let floor: Vec<(usize, f64)> = (0..mesh.len())
+        .filter(|&e| mesh.elements[e].normal.y > 0.99 && mesh.elements[e].centroid.y.abs() < 1e-9)
+        .map(|e| {
+            let el = &mesh.elements[e];
+            let k = 6;
+            let mut f = 0.0;
+            for i in 0..k {
+                for j in 0..k {
+                    let p = el.point(&mesh.positions, (i as f64 + 0.5) / k as f64, (j as f64 + 0.5) / k as f64);
+                    f += radiosity::form_factor::analytic::point_factor(p, DVec3::Y, &opening, -DVec3::Y);
+                }
+            }
+            (e, f / (k * k) as f64)
+        })
+        .collect();
+    assert_eq!(floor.len(), 100);
+    let mut rms = Vec::new();
+    for (name, portals) in variants {
+        let portals: Vec<_> = portals.into_iter().map(|v| radiosity::scene::Portal::new(v).unwrap()).collect();
+        let (s, cast) = radiosity::sky::exposure(&mesh, &rays, &rec, 8, &portals, &NoProgress);
+        let (mut ratio, mut err2) = (0.0, 0.0);
+        for &(e, exact) in &floor {
+            ratio += s[e] / exact;
+            err2 += (s[e] / exact - 1.0).powi(2);
+        }
+        let n = floor.len() as f64;
+        let (mean, r) = (ratio / n, (err2 / n).sqrt());
+        eprintln!("{name}: {cast} rays, floor exposure / exact: mean {mean:.4}, RMS {:.2} %", 100.0 * r);
+        let tol = 4.0 * r / n.sqrt() + 2e-3;
+        assert!((mean - 1.0).abs() < tol, "{name}: mean ratio {mean}, tolerance {tol}");
+        rms.push((r, cast));
+    }
+    assert!(rms[1].0 < 0.25 * rms[0].0 && rms[1].1 < rms[0].1, "the opening as a portal: RMS {:?} against {:?} without", rms[1], rms[0]);
+}
+
+/// Sponza's element exposure with and without its portal against many rays:
+/// `SPONZA_SKY=scenes/sponza-sky.toml cargo test --release -p radiosity --test sky
+/// exposure_noise_under_portals -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn exposure_noise_under_portals() {
+    use radiosity::accel::SceneRays;
+    use radiosity::mesh::Receivers;
+    let Ok(path) = std::env::var("SPONZA_SKY") else { return };
+    let scene = radiosity::scene::load_scene(&path).unwrap();
+    let size = radiosity::mesh::default_size(&scene);
+    let mesh = radiosity::mesh::mesh_uniform(&scene, size);
+    let rays = SceneRays::new(&scene.polygons);
+    let rec = Receivers::compute(&scene, &mesh, &rays);
+    let portals = scene.sky.as_ref().unwrap().portals.clone();
+    let t = std::time::Instant::now();
+    let (truth, _) = radiosity::sky::exposure(&mesh, &rays, &rec, 32, &[], &NoProgress);
+    eprintln!("truth {:.1} s", t.elapsed().as_secs_f64());
+    let area: Vec<f64> = mesh.elements.iter().map(|e| e.area).collect();
+    for (name, axis, ps) in [("cosine 8", 8, &[][..]), ("portal 8", 8, &portals[..]), ("cosine 4", 4, &[][..]), ("portal 12", 12, &portals[..])] {
+        let t = std::time::Instant::now();
+        let (s, n) = radiosity::sky::exposure(&mesh, &rays, &rec, axis, ps, &NoProgress);
+        let secs = t.elapsed().as_secs_f64();
+        let (mut e2, mut a, mut bias, mut lit) = (0.0, 0.0, 0.0, 0.0);
+        for i in 0..s.len() {
+            e2 += area[i] * (s[i] - truth[i]).powi(2);
+            bias += area[i] * (s[i] - truth[i]);
+            lit += area[i] * truth[i];
+            a += area[i];
+        }
+        eprintln!("{name}: {secs:.2} s, {n} rays, RMS {:.5}, mean {:.5} (truth {:.5}), bias {:.2e}", (e2 / a).sqrt(), (lit + bias) / a, lit / a, bias / a);
+    }
+}

@@ -65,6 +65,7 @@ use crate::direct::{direct_irradiance, direct_irradiance_sampled, emitters, LOOP
 use crate::mesh::{Locator, Mesh};
 use crate::sampling::{rng_for, stratified};
 use crate::scene::Scene;
+use crate::sky::{through_portal, PortalTriangle};
 use crate::{Progress, Rgb};
 
 /// Sky rays per position, as `n × n` stratified cosine directions, when the indirect light
@@ -677,48 +678,11 @@ fn gathered(
     sum * (1.0 / dirs.len() as f64)
 }
 
-/// A portal's fan triangle seen from one position: the spherical triangle, the solid angle
-/// of the triangles up to and including it, and its portal's index.
-type PortalTriangle = (crate::sampling::SphericalTriangle, f64, usize);
-
-/// Whether the ray `p + t·dir` (t > 0) passes through one of `portals`.
-#[inline]
-fn through_portal(portals: &[crate::scene::Portal], p: glam::DVec3, dir: glam::DVec3) -> bool {
-    portals.iter().any(|q| {
-        let (v, n) = (q.vertices(), q.normal());
-        let den = n.dot(dir);
-        if den == 0.0 {
-            return false;
-        }
-        let t = n.dot(v[0] - p) / den;
-        if !(t > 0.0) {
-            return false;
-        }
-        let y = p + dir * t;
-        // Inside the convex polygon: on the same side of every edge (either winding).
-        let m = v.len();
-        let (mut pos, mut neg) = (false, false);
-        for k in 0..m {
-            let s = n.dot((v[(k + 1) % m] - v[k]).cross(y - v[k]));
-            pos |= s > 0.0;
-            neg |= s < 0.0;
-        }
-        !(pos && neg)
-    })
-}
-
 /// The sky's irradiance at `p` (normal `n`, on polygon `patch`) through `portals`:
-/// `∫ L(ω) V(ω) cos θ dω` over the directions that pass through a portal, with directions
-/// drawn uniformly in the solid angle of the portals' fan triangles (Arvo 1995;
-/// [`crate::sampling::SphericalTriangle`]), a triangle picked in proportion to its solid
-/// angle by the first coordinate of each of the stratified `pts`: `Ω · mean(L V cos θ)`,
-/// `V` whether the ray leaves the scene. A direction drawn from portal j that also passes
-/// through an earlier portal counts nothing (the earlier one's draws cover it), so portals
-/// that overlap as seen from `p` count their shared sky once. Unbiased whatever the portals
-/// cover: the gather rays take the sky seen in every other direction ([`through_portal`]).
-/// Returns the irradiance and the rays cast; `tris` is scratch (kept to spare an allocation
-/// per position).
+/// [`crate::sky::portal_integral`] of its radiance. Returns the irradiance and the rays
+/// cast; `tris` is scratch (kept to spare an allocation per position).
 #[allow(clippy::too_many_arguments)]
+#[inline]
 fn portal_irradiance(
     rays: &SceneRays,
     sky: &crate::scene::Sky,
@@ -729,48 +693,7 @@ fn portal_irradiance(
     pts: &[(f64, f64)],
     tris: &mut Vec<PortalTriangle>,
 ) -> (Rgb, u64) {
-    use crate::sampling::SphericalTriangle;
-    // The fan triangles in front of p's tangent plane, with their solid angles cumulated and
-    // their portal.
-    tris.clear();
-    let mut total = 0.0;
-    for (j, q) in portals.iter().enumerate() {
-        let v = q.vertices();
-        if v.iter().all(|c| n.dot(*c - p) <= 0.0) {
-            continue;
-        }
-        for k in 1..v.len() - 1 {
-            let dirs = [v[0] - p, v[k] - p, v[k + 1] - p];
-            if dirs.iter().any(|d| !(d.length_squared() > 0.0)) {
-                continue;
-            }
-            if let Some(t) = SphericalTriangle::new(dirs[0].normalize(), dirs[1].normalize(), dirs[2].normalize()) {
-                total += t.area;
-                tris.push((t, total, j));
-            }
-        }
-    }
-    if tris.is_empty() || pts.is_empty() {
-        return (Rgb::ZERO, 0);
-    }
-    let share = total / pts.len() as f64;
-    let (mut sum, mut nrays) = (Rgb::ZERO, 0);
-    for &(u, w) in pts {
-        let t = u * total;
-        let i = tris.partition_point(|x| x.1 <= t).min(tris.len() - 1);
-        let lo = if i == 0 { 0.0 } else { tris[i - 1].1 };
-        let uu = ((t - lo) / tris[i].0.area).clamp(0.0, 1.0 - 1e-12);
-        let d = tris[i].0.sample(uu, w);
-        let c = n.dot(d);
-        if c <= 0.0 || through_portal(&portals[..tris[i].2], p, d) {
-            continue;
-        }
-        nrays += 1;
-        if rays.escapes(p.as_vec3(), d.as_vec3(), Some(patch)) {
-            sum += sky.radiance_in(d, share) * c;
-        }
-    }
-    (sum * (total / pts.len() as f64), nrays)
+    crate::sky::portal_integral(rays, portals, p, n, patch, pts, tris, |d, share| sky.radiance_in(d, share))
 }
 
 #[cfg(test)]
