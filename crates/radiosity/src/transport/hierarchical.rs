@@ -775,8 +775,10 @@ pub struct Hierarchy {
     link_start: Vec<u32>,
     /// Each link's source as a *slot*: an index into `slot_node`, the nodes that some
     /// link or exclusion reads, in node order. A product reads its sources from a table
-    /// of readings per slot ([`Reading`]), compact where the nodes are many and the
-    /// sources few (Sponza: 494 127 nodes; every link's source among a few thousand).
+    /// of readings per slot ([`Reading`]), two cache lines each, instead of five arrays
+    /// over every node (Sponza: 165 525 slots of 494 127 nodes, 28 links a slot; a
+    /// product on one thread 0.60–0.72 → 0.49 s; the conference room: 367 948 of 1 388 325,
+    /// two links a slot, a product 0.35 → 0.33 s).
     link_src: Vec<u32>,
     slot_node: Vec<u32>,
     /// The slot of each exclusion's source.
@@ -871,8 +873,8 @@ const PARALLEL_WALK: usize = 4096;
 /// `Σ A_j B_j n_j` per channel and the largest radiosity below it. Over all its faces
 /// (near links) or, for far links, over its exposed faces: mean `Σ A_j o_j B_j / Σ A_j
 /// o_j`, `Σ A_j o_j B_j n_j`. Two cache lines, one table per kind, one entry per source
-/// slot: the reads of a product stay within a small table instead of five arrays over
-/// every node.
+/// slot: a link's read touches two adjacent lines of a table over the sources only,
+/// instead of five arrays and the node over every node.
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(64))]
 struct Reading {
