@@ -311,7 +311,9 @@ pub fn predict_memory(tree: &Tree, min_size: f64, separation: f64, emitters: u64
     let links =
         PREDICTED_LINKS_PER_NODE * (DEFAULT_SEPARATION / separation).powi(2) * link_nodes(tree, min_size) as f64;
     let elements = tree.order.len() as f64;
-    let node = std::mem::size_of::<Node>() as f64 + 400.0; // node + pull/push buffers
+    // Node + the product's pull/push buffers (312 bytes) + its two reading tables (256
+    // bytes per source slot, at most one slot per node; Sponza: a third of the nodes).
+    let node = std::mem::size_of::<Node>() as f64 + 600.0;
     let direct = if emitters as usize <= DIRECT_MAX_EMITTERS {
         emitters.min(PREDICTED_DIRECT_PER_ELEMENT) as f64 * elements * 8.0
     } else {

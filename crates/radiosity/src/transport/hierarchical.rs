@@ -799,7 +799,8 @@ pub struct Hierarchy {
     link_scale: Vec<f32>,
     /// Per element: what its links bring for `x = 1` before any scale (no direct columns,
     /// no traced row). The closure fit and every row sum are read from it: one product
-    /// instead of five on a large scene (each a walk over every link).
+    /// instead of five on a large scene (each a walk over every link). Taken in
+    /// [`Hierarchy::from_parts`]: the tree (areas, normals, exposure) must not change after.
     link_ones: Vec<f64>,
     /// The closure the links were fitted to, kept to fit them again without the elements
     /// whose rows are traced ([`Hierarchy::set_ray_rows`]).
