@@ -81,7 +81,8 @@ pub fn exposure(
 /// Irradiance from an environment image on every element (zero for an element with no
 /// open area) and the rays cast: `π · mean(L_env(ω) V(x, ω))` over `axis × axis`
 /// cosine-distributed stratified directions, each from its own point of the element's open
-/// part, the image filtered over each ray's share `2π/axis²` of the hemisphere.
+/// part, the image filtered over each ray's share `2π/axis²` of the hemisphere (under
+/// `portals`, as [`exposure`] takes them, over each ray's or draw's share).
 pub fn environment_irradiance(
     mesh: &Mesh,
     rays: &SceneRays,

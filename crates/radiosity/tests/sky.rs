@@ -58,6 +58,23 @@ fn open_box(h: f64, wall_rho: f64, lid: Option<f64>, sky: Option<f64>) -> Scene 
     Scene::from_desc(d).unwrap()
 }
 
+/// The open box's opening (the unit square at y = 1) and the portal layouts the portal
+/// tests try: none, the opening itself, half of it, a larger one higher up (part of it
+/// hidden by the walls), and two that overlap as seen from the floor (their shared sky
+/// counts once).
+fn portal_variants() -> (Vec<DVec3>, [(&'static str, Vec<Vec<DVec3>>); 5]) {
+    let sq = |x0: f64, x1: f64, y: f64, z0: f64, z1: f64| vec![DVec3::new(x0, y, z0), DVec3::new(x1, y, z0), DVec3::new(x1, y, z1), DVec3::new(x0, y, z1)];
+    let opening = sq(0.0, 1.0, 1.0, 0.0, 1.0);
+    let variants = [
+        ("no portal", vec![]),
+        ("the opening", vec![opening.clone()]),
+        ("half the opening", vec![sq(0.0, 0.5, 1.0, 0.0, 1.0)]),
+        ("larger, higher", vec![sq(-0.5, 1.5, 1.3, -0.5, 1.5)]),
+        ("the opening and half of it higher up", vec![opening.clone(), sq(0.0, 0.5, 1.2, 0.0, 1.0)]),
+    ];
+    (opening, variants)
+}
+
 fn object_radiance(solved: &Solved, name: &str) -> f64 {
     let o = solved.objects().into_iter().find(|o| o.name == name).unwrap_or_else(|| panic!("no object {name}"));
     o.radiance_rgb[0]
@@ -518,16 +535,7 @@ fn environment_files_load_from_toml_with_clear_errors() {
 /// pixels' error to a fraction of the rays' alone.
 #[test]
 fn sky_portals_keep_the_light_and_cut_the_noise() {
-    let sq = |x0: f64, x1: f64, y: f64, z0: f64, z1: f64| vec![DVec3::new(x0, y, z0), DVec3::new(x1, y, z0), DVec3::new(x1, y, z1), DVec3::new(x0, y, z1)];
-    let opening = sq(0.0, 1.0, 1.0, 0.0, 1.0);
-    let variants: [(&str, Vec<Vec<DVec3>>); 5] = [
-        ("no portal", vec![]),
-        ("the opening", vec![opening.clone()]),
-        ("half the opening", vec![sq(0.0, 0.5, 1.0, 0.0, 1.0)]),
-        ("larger, higher", vec![sq(-0.5, 1.5, 1.3, -0.5, 1.5)]),
-        // Overlapping as seen from the floor: their shared sky counts once.
-        ("the opening and half of it higher up", vec![opening.clone(), sq(0.0, 0.5, 1.2, 0.0, 1.0)]),
-    ];
+    let (opening, variants) = portal_variants();
     let (w, h) = (24, 24);
     let cam = Camera { position: DVec3::new(0.5, 0.95, 0.5), look_at: DVec3::new(0.5, 0.0, 0.5), up: DVec3::Z, vfov_deg: 60.0 };
     let pin = radiosity::render::PinholeCamera::new(&cam, w, h);
@@ -573,15 +581,7 @@ fn sky_portals_keep_the_light_and_cut_the_noise() {
 fn element_exposure_through_portals_matches_the_opening() {
     use radiosity::accel::SceneRays;
     use radiosity::mesh::Receivers;
-    let sq = |x0: f64, x1: f64, y: f64, z0: f64, z1: f64| vec![DVec3::new(x0, y, z0), DVec3::new(x1, y, z0), DVec3::new(x1, y, z1), DVec3::new(x0, y, z1)];
-    let opening = sq(0.0, 1.0, 1.0, 0.0, 1.0);
-    let variants: [(&str, Vec<Vec<DVec3>>); 5] = [
-        ("no portal", vec![]),
-        ("the opening", vec![opening.clone()]),
-        ("half the opening", vec![sq(0.0, 0.5, 1.0, 0.0, 1.0)]),
-        ("larger, higher", vec![sq(-0.5, 1.5, 1.3, -0.5, 1.5)]),
-        ("the opening and half of it higher up", vec![opening.clone(), sq(0.0, 0.5, 1.2, 0.0, 1.0)]),
-    ];
+    let (opening, variants) = portal_variants();
     let scene = open_box(1.0, 0.0, None, Some(1.0));
     let mesh = radiosity::mesh::mesh_uniform(&scene, 0.1);
     let rays = SceneRays::new(&scene.polygons);
