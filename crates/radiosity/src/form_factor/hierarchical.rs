@@ -1192,12 +1192,14 @@ impl Ctx<'_> {
     /// (`Tree::front_area`, its share of the link's spread), and returns their sum. Smaller ones stay
     /// lit: on Sponza, two-sided throughout, recording every one took more memory than the
     /// links.
-    fn behind_shares(&self, r: u32, s: u32, tol: f64, d: DVec3, near: bool, sc: &mut Scratch) -> f64 {
+    /// `front`: `r`'s front area towards `d` where the caller has it.
+    #[allow(clippy::too_many_arguments)]
+    fn behind_shares(&self, r: u32, s: u32, tol: f64, d: DVec3, near: bool, front: Option<f64>, sc: &mut Scratch) -> f64 {
         self.faces_behind(r, s, tol, sc);
         if sc.behind.is_empty() {
             return 0.0;
         }
-        let floor = BEHIND_SHARE * self.tree.front_area(r, d, !near);
+        let floor = BEHIND_SHARE * front.unwrap_or_else(|| self.tree.front_area(r, d, !near));
         for (q, share) in sc.behind.iter_mut() {
             *share = self.tree.front_area(*q, d, !near);
         }
@@ -1497,7 +1499,8 @@ impl Ctx<'_> {
             let (f, d) = self.terminal_factor(r, s, near, minor, rng, c, sc);
             if f > 0.0 && d != DVec3::ZERO {
                 // R's faces behind a surface source take none of it: the rest share it.
-                let spread = self.tree.front_area(r, d, !near) - self.behind_shares(r, s, tol, d, near, sc);
+                let front = self.tree.front_area(r, d, !near);
+                let spread = front - self.behind_shares(r, s, tol, d, near, Some(front), sc);
                 if spread > 1e-6 * nr.area as f64 {
                     let read = if ns.surface { Link::MEAN } else { self.reading_towards(s, -d, near) };
                     let w = (f * nr.area as f64 / spread).min(1.0);
@@ -1547,7 +1550,7 @@ impl Ctx<'_> {
                     let w = (kv * v).min(1.0);
                     links.push(Link { r, s, f: w as f32, g: d.as_vec3().to_array(), dir: read, near });
                     if ns.surface {
-                        self.behind_shares(r, s, tol, d, near, sc);
+                        self.behind_shares(r, s, tol, d, near, None, sc);
                         self.exclude_behind(s, w, near, read, sc);
                     }
                 }

@@ -477,7 +477,7 @@ impl Tree {
         }
         let (a, b) = (self.normal_start[k as usize] as usize, self.normal_start[k as usize + 1] as usize);
         let bins = if exposed { &self.normal_bins_exposed } else { &self.normal_bins };
-        bins[a..b].iter().map(|m| m.as_dvec3().dot(d).max(0.0)).sum()
+        front_sum(&bins[a..b], d)
     }
 
     /// True when node `a` holds every element of node `b` (`b` is `a` or below it).
@@ -500,7 +500,7 @@ impl Tree {
         // The topmost surface nodes below k, one contiguous run.
         let [a, b] = self.top_range[k as usize];
         let run = if exposed { &self.top_nx[a as usize..b as usize] } else { &self.top_n[a as usize..b as usize] };
-        run.iter().map(|m| m.as_dvec3().dot(d).max(0.0)).sum()
+        front_sum(run, d)
     }
 
     /// The element at area fraction `u ∈ [0, 1)` of node `k` (area-uniform choice).
@@ -561,6 +561,23 @@ impl Tree {
             out.push(c[1]);
         }
     }
+}
+
+/// `Σ max(0, m·d)` over area-weighted normals `m`: the area they present to the direction
+/// `d`. Four running sums instead of one, so that the additions do not wait on each other
+/// (runs of a cluster's faces are long on curved models: on Sponza this sum and
+/// [`Tree::projected_area`]'s took 6 % of a render with one).
+#[inline]
+fn front_sum(run: &[Vec3], d: DVec3) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let mut quads = run.chunks_exact(4);
+    for q in &mut quads {
+        for (a, m) in acc.iter_mut().zip(q) {
+            *a += m.as_dvec3().dot(d).max(0.0);
+        }
+    }
+    let rest: f64 = quads.remainder().iter().map(|m| m.as_dvec3().dot(d).max(0.0)).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + rest
 }
 
 /// Rounds an f64 box corner to f32 outwards.
