@@ -89,6 +89,7 @@ impl RowSource for Rows<'_> {
         }
         let mut rng = rng_for(opts.seed, i as u64);
         let size_i = ei.area.sqrt();
+        let (ci, ni) = ei.corners(&mesh.positions);
         let mut nrays = 0u64;
         row.clear();
         let Some(&c1) = receivers.points(i, 1).first() else {
@@ -258,7 +259,6 @@ impl RowSource for Rows<'_> {
                 // per-object median against the path tracer 1.80 → 1.24 %, area bias
                 // −1.31 → +0.07 % (BENCHMARKS.md, "Near pairs exactly").
                 let unocc_mean = if cut.is_empty() && recv_pts.len() == k * k && unocc > 0.0 {
-                    let (ci, ni) = ei.corners(&mesh.positions);
                     let exact = super::analytic::area_factor_with(&mut exact_scratch, &ci[..ni], ei.normal, cj, ej.normal) / ei.area;
                     sum *= exact / (unocc / m);
                     exact

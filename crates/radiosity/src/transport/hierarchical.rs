@@ -569,14 +569,15 @@ impl Tree {
 /// [`Tree::projected_area`]'s took 6 % of a render with one).
 #[inline]
 fn front_sum(run: &[Vec3], d: DVec3) -> f64 {
+    let term = |m: &Vec3| m.as_dvec3().dot(d).max(0.0);
     let mut acc = [0.0f64; 4];
     let mut quads = run.chunks_exact(4);
     for q in &mut quads {
         for (a, m) in acc.iter_mut().zip(q) {
-            *a += m.as_dvec3().dot(d).max(0.0);
+            *a += term(m);
         }
     }
-    let rest: f64 = quads.remainder().iter().map(|m| m.as_dvec3().dot(d).max(0.0)).sum();
+    let rest: f64 = quads.remainder().iter().map(term).sum();
     (acc[0] + acc[1]) + (acc[2] + acc[3]) + rest
 }
 
