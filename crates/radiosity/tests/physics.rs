@@ -276,7 +276,9 @@ fn a_two_sided_lamp_just_under_the_ceiling_loses_no_light() {
 /// large side came out 10 % short of the exact value (0.182 against 0.202) while the small
 /// side's was right, so a closed room lost the light of a lamp's back (RenderPark's cube
 /// `--two-sided`: 2.95 % escaped). Near pairs now take the exact unoccluded factor: both
-/// sides within 0.5 % of the double contour integral, so reciprocal to 1 %.
+/// sides within 0.5 % of the double contour integral, so reciprocal to 1 %. The hemicube's
+/// 3 × 3 hemicubes had the same step (Baum et al. 1989's analytic near pairs mend it; the
+/// cube let 2.88 % escape).
 #[test]
 fn near_parallel_squares_exchange_reciprocally() {
     let (z, lo, hi) = (0.01, 0.33, 0.78);
@@ -285,14 +287,17 @@ fn near_parallel_squares_exchange_reciprocally() {
     let scene = common::quads(&[("big", big), ("small", small)]);
     assert!(scene.polygons[1].normal.z < 0.0 && scene.polygons[0].normal.z > 0.0);
     let exact = radiosity::form_factor::analytic::area_factor(&big, scene.polygons[0].normal, &small, scene.polygons[1].normal);
-    let (mesh, f, _) = factors(&scene, 0.25);
-    let (a_big, a_small) = (1.0, (hi - lo) * (hi - lo));
-    let from_big = a_big * object_factor(&scene, &mesh, &f, 0, 1);
-    let from_small = a_small * object_factor(&scene, &mesh, &f, 1, 0);
-    eprintln!("A F: exact {exact:.5}, from the big square {from_big:.5}, from the small one {from_small:.5}");
-    assert!(exact > 0.95 * a_small, "exact {exact}");
-    for (what, got) in [("big", from_big), ("small", from_small)] {
-        assert!((got / exact - 1.0).abs() < 0.005, "A F from the {what} square {got:.5}, exact {exact:.5}");
+    assert!(exact > 0.95 * (hi - lo) * (hi - lo), "exact {exact}");
+    for method in [form_factor::Method::PointSampled, form_factor::Method::Hemicube] {
+        let (mesh, f, _) = factors_with(&scene, 0.25, &Options { method, ..Options::default() });
+        let (a_big, a_small) = (1.0, (hi - lo) * (hi - lo));
+        let from_big = a_big * object_factor(&scene, &mesh, &f, 0, 1);
+        let from_small = a_small * object_factor(&scene, &mesh, &f, 1, 0);
+        let m = method.name();
+        eprintln!("{m}: A F exact {exact:.5}, from the big square {from_big:.5}, from the small one {from_small:.5}");
+        for (what, got) in [("big", from_big), ("small", from_small)] {
+            assert!((got / exact - 1.0).abs() < 0.005, "{m}: A F from the {what} square {got:.5}, exact {exact:.5}");
+        }
+        assert!((from_big / from_small - 1.0).abs() < 0.01, "{m}: reciprocity: {from_big:.5} against {from_small:.5}");
     }
-    assert!((from_big / from_small - 1.0).abs() < 0.01, "reciprocity: {from_big:.5} against {from_small:.5}");
 }

@@ -450,7 +450,7 @@ pub(crate) struct Context<'a> {
     /// Per patch: (a point of its plane, unit normal).
     pub planes: Vec<(DVec3, DVec3)>,
     /// Per patch: the lower-numbered coincident same-facing patches that overlap it and
-    /// own the overlap ([`twins::coincident_twins`]; point-sampled and adaptive use it).
+    /// own the overlap ([`twins::coincident_twins`]; point-sampled, hemicube and adaptive use it).
     pub twins: Vec<Vec<u32>>,
     /// Per patch: how far its vertices may lie from its plane (the planarity tolerance
     /// that input polygons are accepted with, on its size, plus `eps`).
