@@ -152,9 +152,9 @@ pub(crate) struct Scratch {
     cached: u32,
     a: Vec<DVec3>,
     b: Vec<DVec3>,
-    /// Per entry of the row being corrected: its far weight `(s_i / d_ij)²`, −1 for a near
-    /// pair ([`Rows::near_pairs_exactly`]).
-    far: Vec<f64>,
+    /// The row being corrected, as [`super::settle_far_field`] takes it
+    /// ([`Rows::near_pairs_exactly`]).
+    row: Vec<(u32, f64, bool, f64)>,
     exact: super::analytic::Scratch,
 }
 
@@ -189,7 +189,7 @@ impl RowSource for Rows<'_> {
             cached: u32::MAX,
             a: Vec::new(),
             b: Vec::new(),
-            far: Vec::new(),
+            row: Vec::new(),
             exact: Default::default(),
         }
     }
@@ -250,11 +250,10 @@ impl Rows<'_> {
     /// element): where `i` is wholly open and `j` has no coincident twin, `F_ij` becomes the
     /// exact unoccluded factor (double contour integral, [`super::analytic`]; reciprocal)
     /// times the visible share the hemicubes saw, `F_hc / F_unocc` at the same points.
-    /// What that adds is taken from the row's far entries in proportion to
-    /// `F_ij (s_i / d_ij)²`, as point-sampled rows do (a distant lamp barely gives any up),
-    /// and a row never exceeds one. RenderPark's closed cube `--two-sided` let 2.88 % of
+    /// What that adds is taken from the row's far entries as point-sampled rows do
+    /// ([`super::settle_far_field`]). RenderPark's closed cube `--two-sided` let 2.88 % of
     /// its light escape through the ceiling above its lamps' back sides.
-    fn near_pairs_exactly(&self, i: usize, pts: &[DVec3], row: &mut [(u32, f64)], s: &mut Scratch) {
+    fn near_pairs_exactly(&self, i: usize, pts: &[DVec3], out: &mut [(u32, f64)], s: &mut Scratch) {
         let ctx = self.ctx;
         let mesh = ctx.mesh;
         let ei = &mesh.elements[i];
@@ -264,49 +263,33 @@ impl Rows<'_> {
         }
         let (ci, ni) = ei.corners(&mesh.positions);
         let size_i = ei.area.sqrt();
-        s.far.clear();
-        let (mut excess, mut wsum, mut near_sum) = (0.0, 0.0, 0.0);
-        for e in row.iter_mut() {
-            let ej = &mesh.elements[e.0 as usize];
+        s.row.clear();
+        let mut excess = 0.0;
+        for &(j, f_hc) in out.iter() {
+            let ej = &mesh.elements[j as usize];
             let d = (ej.centroid - ei.centroid).length().max(1e-300);
-            let w = (size_i / d).powi(2);
             if size_i.max(ej.area.sqrt()) < NEAR_RATIO * d || self.twinned[ej.patch as usize] {
-                s.far.push(w);
-                wsum += e.1 * w;
+                s.row.push((j, f_hc, true, (size_i / d).powi(2)));
                 continue;
             }
-            s.far.push(-1.0);
             let (cj, nj) = ej.corners(&mesh.positions);
             let cj = &cj[..nj];
             let unocc = pts.iter().map(|&x| point_to_polygon(x, ei.normal, cj, ej.normal)).sum::<f64>() / pts.len() as f64;
+            let mut f = f_hc;
             if unocc > 0.0 {
                 let exact = super::analytic::area_factor_with(&mut s.exact, &ci[..ni], ei.normal, cj, ej.normal) / ei.area;
                 // The share is not held to one: the hemicubes' aliasing scatters it about
                 // the truth both ways (a cap at one took 0.26 % from office2's near pairs
                 // in all), but to two, against a grazing pair whose points see almost
                 // nothing of `j`.
-                let f = exact * (e.1 / unocc).min(MAX_SHARE);
-                excess += f - e.1;
-                e.1 = f;
+                f = exact * (f_hc / unocc).min(MAX_SHARE);
+                excess += f - f_hc;
             }
-            near_sum += e.1;
+            s.row.push((j, f, false, 0.0));
         }
-        if wsum > 0.0 {
-            for (e, &w) in row.iter_mut().zip(&s.far) {
-                if w >= 0.0 {
-                    e.1 *= (1.0 - excess * w / wsum).clamp(0.0, 2.0);
-                }
-            }
-        }
-        let total: f64 = row.iter().map(|e| e.1).sum();
-        if total > 1.0 {
-            // Never above one (no point sees more than its hemisphere): the far entries give
-            // way, and the near ones only if they alone exceed it.
-            let far = total - near_sum;
-            let (kn, kf) = if near_sum >= 1.0 { (1.0 / near_sum, 0.0) } else { (1.0, (1.0 - near_sum) / far.max(f64::MIN_POSITIVE)) };
-            for (e, &w) in row.iter_mut().zip(&s.far) {
-                e.1 *= if w >= 0.0 { kf } else { kn };
-            }
+        super::settle_far_field(&mut s.row, excess);
+        for (o, e) in out.iter_mut().zip(&s.row) {
+            o.1 = e.1;
         }
     }
 }

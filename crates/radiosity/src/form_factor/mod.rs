@@ -509,6 +509,31 @@ impl<'a> Context<'a> {
     }
 }
 
+/// Settles a row whose near entries were made exact (point-sampled and hemicube rows):
+/// `row` holds (column, factor, far, far weight `(s_i / d_ij)²`), and `excess` is what the
+/// near entries gained over the point estimate that the far field was measured against.
+/// The far entries give it up (or take it, when negative) in proportion to
+/// `F_ij (s_i / d_ij)²`, each by at most its own factor: the difference between an
+/// element's mean and its centre value is a second-order term, so nearer parts of the far
+/// field give it up and a distant light barely does (a uniform scale would dim direct
+/// light near every corner). Then, should the row exceed one (no point sees more than its
+/// hemisphere), the far entries give way.
+pub(crate) fn settle_far_field(row: &mut [(u32, f64, bool, f64)], excess: f64) {
+    let wsum: f64 = row.iter().filter(|e| e.2).map(|e| e.1 * e.3).sum();
+    if wsum > 0.0 {
+        for e in row.iter_mut().filter(|e| e.2) {
+            e.1 *= (1.0 - excess * e.3 / wsum).clamp(0.0, 2.0);
+        }
+    }
+    let (near, far) = row.iter().fold((0.0, 0.0), |(n, f), e| if e.2 { (n, f + e.1) } else { (n + e.1, f) });
+    if near + far > 1.0 && far > 0.0 {
+        let k = ((1.0 - near) / far).max(0.0);
+        for e in row.iter_mut().filter(|e| e.2) {
+            e.1 *= k;
+        }
+    }
+}
+
 /// One method's per-row work.
 pub(crate) trait RowSource: Sync {
     /// Per-thread buffers.

@@ -163,7 +163,6 @@ impl RowSource for Rows<'_> {
         // from the far field (scale α), so each row sums exactly to the unoccluded
         // total seen from c1 — one in a closed room (the furnace test).
         let mut near_excess = 0.0;
-        let mut far_sum = 0.0;
         let mut exact_scratch = super::analytic::Scratch::default();
         for &q in patch_list.iter() {
             let pe = mesh.patches[q as usize];
@@ -276,42 +275,10 @@ impl RowSource for Rows<'_> {
                 for e in row[far_start..].iter_mut().filter(|e| e.2) {
                     e.1 *= scale;
                 }
-                far_sum += target;
-            } else {
-                far_sum += approx_far_q;
             }
         }
-        // The excess D is taken from the far field in proportion to F_ij·(s_i/d_ij)²:
-        // the difference between an element's mean and its centroid value is a
-        // second-order term, so nearer parts of the far field give it up and a
-        // distant light barely does (a uniform scale would dim direct light near
-        // every corner).
-        let _ = far_sum;
-        let wsum: f64 = row.iter().filter(|e| e.2).map(|e| e.1 * e.3).sum();
-        let near_vis: f64 = row.iter().filter(|e| !e.2).map(|e| e.1).sum();
-        let far_vis: f64 = row.iter().filter(|e| e.2).map(|e| e.1).sum();
-        let scale_far = |e: &(u32, f64, bool, f64)| -> f64 {
-            if !e.2 {
-                return e.1;
-            }
-            if wsum > 0.0 {
-                e.1 * (1.0 - near_excess * e.3 / wsum).clamp(0.0, 2.0)
-            } else {
-                e.1
-            }
-        };
-        let start = out.len();
-        out.extend(row.iter().map(|e| (e.0, scale_far(e))).filter(|e| e.1 > 0.0));
-        // Never let the correction push a row above one (no point sees more than its
-        // hemisphere).
-        let total: f64 = out[start..].iter().map(|e| e.1).sum();
-        if total > 1.0 && far_vis > 0.0 {
-            let k = ((1.0 - near_vis) / (total - near_vis)).max(0.0);
-            let near: std::collections::HashSet<u32> = row.iter().filter(|e| !e.2).map(|e| e.0).collect();
-            for e in out[start..].iter_mut().filter(|e| !near.contains(&e.0)) {
-                e.1 *= k;
-            }
-        }
+        super::settle_far_field(row, near_excess);
+        out.extend(row.iter().filter(|e| e.1 > 0.0).map(|e| (e.0, e.1)));
         nrays
     }
 }
