@@ -2366,3 +2366,42 @@ fn direct_columns_near_emitters() {
         println!("  element {} at {:.3?} open {:.3}: D {:.4} exact {:.4}", w.1, e.centroid, sol.receivers.open_fraction[w.1], w.2, w.3);
     }
 }
+
+/// RenderPark's cube in small: a closed two-sided room whose lamp (two-sided, black, both
+/// sides emitting) hangs 0.01 under a white ceiling. The ceiling above the lamp's back is
+/// as bright as the lamp's reflection and sends nearly all of it back into the gap; area-
+/// uniform visibility rays rarely met that spot, so the ceiling's links to the room were
+/// kept whole at the ceiling's mean visibility and carried the spot's light past the lamp
+/// (the cube itself: 2.02 % created), and the direct columns' jittered points found the
+/// lamp's light on the ceiling to ±10 % by the seed. Nothing may escape or be created.
+#[test]
+fn a_lamp_just_under_the_ceiling_keeps_a_closed_room_closed() {
+    let mut d = SceneDesc { name: "lamp-under-ceiling".into(), two_sided: true, ..Default::default() };
+    d.materials.push(MaterialDesc::diffuse("white", Rgb::splat(0.6)));
+    d.materials.push(MaterialDesc::diffuse("grey", Rgb::splat(0.5)));
+    d.materials.push(MaterialDesc { emission: Rgb::splat(100.0), ..MaterialDesc::diffuse("lamp", Rgb::splat(0.0)) });
+    let room = box_faces(v(0.0, 0.0, 0.0), v(1.0, 1.0, 1.0), true);
+    let lamp = vec![v(0.4, 0.4, 0.99), v(0.6, 0.4, 0.99), v(0.6, 0.6, 0.99), v(0.4, 0.6, 0.99)];
+    d.objects.push(ObjectDesc { name: "room".into(), loc: None });
+    d.objects.push(ObjectDesc { name: "lamp".into(), loc: None });
+    for p in room {
+        // The ceiling (z = 1) white, the rest grey.
+        let material = if p.iter().all(|q| q.z == 1.0) { 0 } else { 1 };
+        d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: p, material, object: 0, loc: None });
+    }
+    d.polygons.push(PolygonDesc { uvs: Vec::new(), vertices: lamp, material: 2, object: 1, loc: None });
+    let scene = Scene::from_desc(d).unwrap();
+    for seed in [0, 1, 2] {
+        let mut s = Settings { mesh_size: Some(0.05), ..hierarchical() };
+        s.form_factors.seed = seed;
+        s.solve.tolerance = 1e-8;
+        let solved = solve_scene(scene.clone(), &s, &NoProgress).unwrap();
+        assert!(solved.transport.as_ref().unwrap().hierarchy().unwrap().direct().is_some(), "the lamp goes through direct columns");
+        let e = solved.energy();
+        let x = e.escaped[1] / e.emitted[1];
+        eprintln!("seed {seed}: escaped {:+.3} % of a closed room", 100.0 * x);
+        // Measured 2026-12-07: −5.1 / −5.7 / −6.3 % before (created), +0.57 / … now;
+        // held to the 1 % of the closed furnace rooms.
+        assert!(x.abs() <= 0.01, "seed {seed}: {:+.3} % escaped (negative: created)", 100.0 * x);
+    }
+}

@@ -517,7 +517,7 @@ impl Tree {
 
     /// The position in tree order at fraction `u` of node `k`'s share of the prefix sums `p`.
     #[inline]
-    fn slot_by(&self, p: &[f64], k: u32, u: f64) -> usize {
+    pub(crate) fn slot_by(&self, p: &[f64], k: u32, u: f64) -> usize {
         let nd = &self.nodes[k as usize];
         let (a, b) = (nd.first as usize, (nd.first + nd.count) as usize);
         let target = p[a] + u * (p[b] - p[a]);
