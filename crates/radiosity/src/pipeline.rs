@@ -373,6 +373,7 @@ impl Prepared {
             if progress.should_stop() {
                 return Err(Error::Cancelled);
             }
+            check_emitters_open(scene, mesh, &receivers)?;
             let t_sky = Instant::now();
             self.external_irradiance = external_irradiance(scene, mesh, rays, &receivers, progress)?;
             let sky_seconds = t_sky.elapsed().as_secs_f64();
@@ -604,6 +605,40 @@ pub fn check_transport(solver: Solver, kind: transport::Kind) -> Result<()> {
         )));
     }
     Ok(())
+}
+
+/// Refuses a scene whose only light is emitting polygons that the coverage test found
+/// wholly covered (inside closed geometry: every probe from them meets the back of a
+/// surface). They emit nothing, the solution is black, and the energy line and relative
+/// residuals divide by an emitted power of zero: a lamp in a closed room whose walls face
+/// outward, one-sided, wrote a black image with "emitted 0" and exit 0, and with
+/// `--two-sided` (where the generated back copies face inward, and inside a closed box
+/// still counts as inside) every solver "diverged" with a residual of infinity naming the
+/// lamp, and `--solver direct` printed "absorbed inf %".
+fn check_emitters_open(scene: &Scene, mesh: &Mesh, receivers: &Receivers) -> Result<()> {
+    if scene.lit_sky().is_some() || !scene.lights.is_empty() {
+        return Ok(());
+    }
+    let (_, emission) = element_materials(scene, mesh);
+    let mut emitting = (0..mesh.len()).filter(|&i| emission[i].max_element() > 0.0).peekable();
+    if emitting.peek().is_none() || (0..mesh.len()).any(|i| emission[i].max_element() > 0.0 && receivers.open_fraction[i] > 0.0) {
+        return Ok(());
+    }
+    let mut places: Vec<String> = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for i in emitting {
+        if seen.insert(mesh.elements[i].patch) && places.len() < 3 {
+            places.push(element_place(scene, mesh, i));
+        }
+    }
+    Err(Error::Invalid(format!(
+        "every emitting polygon lies inside closed geometry, so no light leaves it ({}{}): every probe ray from \
+         them meets the back of a surface first. Are the surfaces around them wound facing away from them (a room \
+         whose walls face outward reads as a solid box, also with --two-sided)? Reverse their winding so that they \
+         face the lamps",
+        places.join(", "),
+        if seen.len() > 3 { ", …" } else { "" }
+    )))
 }
 
 /// Meshes, builds the BVH, computes form factors (not for the stochastic solvers) and

@@ -487,6 +487,56 @@ fn scene_without_light_is_an_error_saying_what_was_skipped() {
     assert!(!load("dark.obj", &format!("{QUAD}f 1 2 3 4\n")).unwrap().check_emits().unwrap_err().to_string().contains("looks like"));
 }
 
+/// A lamp inside a closed room whose six walls face outward: the coverage test reads the
+/// room as a solid box, also with `--two-sided` (inside a closed box counts as inside), so
+/// the lamp is covered and emits nothing. It wrote a black image with "emitted 0" and exit
+/// 0 one-sided; two-sided, every solver "diverged" with a residual of infinity naming the
+/// lamp and `--solver direct` printed "absorbed inf %" with exit 0. Now a clear error that
+/// names the lamp and the winding; the same room wound inward solves.
+#[test]
+fn lamp_inside_a_room_wound_outward_is_an_error_naming_the_lamp() {
+    use radiosity::pipeline::{solve_scene, Settings};
+    write("outroom.mtl", "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 100 100 100\n");
+    let corners = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n\
+                   v 0.4 0.4 0.99\nv 0.6 0.4 0.99\nv 0.6 0.6 0.99\nv 0.4 0.6 0.99\n";
+    // Outward: the floor seen from below is counter-clockwise, and so on.
+    let outward = ["1 4 3 2", "5 6 7 8", "1 2 6 5", "4 8 7 3", "1 5 8 4", "2 3 7 6"];
+    let faces = |flip: bool| -> String {
+        outward
+            .iter()
+            .map(|f| {
+                let mut v: Vec<&str> = f.split(' ').collect();
+                if flip {
+                    v.reverse();
+                }
+                format!("f {}\n", v.join(" "))
+            })
+            .collect()
+    };
+    for (name, flip) in [("outroom.obj", false), ("inroom.obj", true)] {
+        let text = format!("mtllib outroom.mtl\n{corners}usemtl grey\n{}usemtl lamp\nf 9 10 11 12\n", faces(flip));
+        for two_sided in [false, true] {
+            let mut d = scene::load(write(name, &text).to_str().unwrap()).unwrap();
+            d.two_sided = two_sided;
+            let sc = Scene::from_desc(d).unwrap();
+            let settings = Settings { mesh_size: Some(0.1), ..Default::default() };
+            match (flip, solve_scene(sc, &settings, &radiosity::NoProgress)) {
+                (false, Err(e)) => {
+                    let e = e.to_string();
+                    let lamp = format!("{}:22", tmp(name).display());
+                    assert!(e.contains("inside closed geometry") && e.contains(&lamp) && e.contains("winding"), "two-sided {two_sided}: {e}");
+                }
+                (false, Ok(s)) => panic!("two-sided {two_sided}: solved, emitted {:?}", s.energy().emitted),
+                (true, Ok(s)) => {
+                    let e = s.energy();
+                    assert!(e.emitted[1] > 0.0 && e.escaped[1].abs() < 0.01 * e.emitted[1], "two-sided {two_sided}: {e:?}");
+                }
+                (true, Err(e)) => panic!("inward, two-sided {two_sided}: {e}"),
+            }
+        }
+    }
+}
+
 #[test]
 fn cameras_at_extreme_or_degenerate_values_are_refused_naming_the_file() {
     let p = |n: &str| tmp(n).display().to_string();
