@@ -2288,6 +2288,10 @@ fn direct_columns_near_emitters() {
     let emitters: Vec<usize> = (0..sol.mesh.len()).filter(|&j| em[j].y > 0.0).collect();
     let (mut tot_d, mut tot_x) = (0.0, 0.0);
     let mut worst = Vec::new();
+    // `ALL=1`: every receiver against every emitting element in front of it (occlusion
+    // ignored by the exact side), summed per object.
+    let all = std::env::var("ALL").is_ok();
+    let mut by_object: std::collections::BTreeMap<u32, (f64, f64)> = Default::default();
     for i in 0..sol.mesh.len() {
         let ei = &sol.mesh.elements[i];
         if em[i].y > 0.0 || sol.receivers.open_fraction[i] < 1.0 {
@@ -2299,7 +2303,8 @@ fn direct_columns_near_emitters() {
             .copied()
             .filter(|&j| {
                 let ej = &sol.mesh.elements[j];
-                ei.normal.dot(ej.centroid - ei.centroid).abs() < gap && ej.normal.dot(ei.centroid - ej.centroid) > 0.0 && (ej.centroid - ei.centroid).length() < 4.0 * ei.area.sqrt().max(ej.area.sqrt())
+                let close = ei.normal.dot(ej.centroid - ei.centroid).abs() < gap && (ej.centroid - ei.centroid).length() < 4.0 * ei.area.sqrt().max(ej.area.sqrt());
+                (all || close) && ej.normal.dot(ei.centroid - ej.centroid) > 0.0 && ei.normal.dot(ej.centroid - ei.centroid) > 0.0
             })
             .collect();
         if near.is_empty() {
@@ -2318,11 +2323,17 @@ fn direct_columns_near_emitters() {
         }
         tot_d += ei.area * fd;
         tot_x += ei.area * fx;
+        let o = by_object.entry(sol.scene.polygons[ei.patch as usize].object).or_default();
+        o.0 += ei.area * fd;
+        o.1 += ei.area * fx;
         worst.push((fd - fx, i, fd, fx));
     }
     println!("receivers near emitters: {}; A·D {tot_d:.5e} against exact {tot_x:.5e} ({:+.2} %)", worst.len(), 100.0 * (tot_d / tot_x - 1.0));
+    for (o, (dd, xx)) in &by_object {
+        println!("  object {} {}: A·D {dd:.5e} exact {xx:.5e} ({:+.2} %)", o, sol.scene.objects[*o as usize].name, 100.0 * (dd / xx - 1.0));
+    }
     worst.sort_by(|a, b| a.0.total_cmp(&b.0));
-    if let Some(w) = worst.first() {
+    if let Some(w) = worst.first().filter(|_| !all) {
         let e = &sol.mesh.elements[w.1];
         println!("worst: corners {:.3?} area {:.4}", &e.corners(&sol.mesh.positions).0[..e.vertex_count()], e.area);
         let (cols, vals) = d.row(w.1);
