@@ -534,6 +534,7 @@ impl Prepared {
         };
         form_factor::push_warning(crate::back_faces::created_warning(&solution.energy, cause), progress, &mut warnings);
         form_factor::push_warning(crate::back_faces::two_sided_emitter_warning(&self.scene, &solution.energy), progress, &mut warnings);
+        form_factor::push_warning(covered_emitters_warning(&self.scene, &self.mesh, &self.receivers), progress, &mut warnings);
         for l in self.scene.lights.iter().filter(|l| crate::lights::enclosed(&self.scene, &self.rays, l)) {
             let at = l.loc.as_ref().map_or(String::new(), |loc| format!("{loc}: "));
             let w = format!(
@@ -639,6 +640,41 @@ fn check_emitters_open(scene: &Scene, mesh: &Mesh, receivers: &Receivers) -> Res
         places.join(", "),
         if seen.len() > 3 { ", …" } else { "" }
     )))
+}
+
+/// A warning naming the emitting polygons (input sides; generated back copies aside) that
+/// the coverage test found wholly covered while others emit: inside closed geometry, they
+/// light nothing (a lamp inside a closed box whose faces point outward reads as inside a
+/// solid). [`check_emitters_open`] refuses the run when none is left.
+fn covered_emitters_warning(scene: &Scene, mesh: &Mesh, receivers: &Receivers) -> Option<String> {
+    if receivers.open_fraction.is_empty() {
+        return None;
+    }
+    let covered: Vec<usize> = (0..scene.polygons.len())
+        .filter(|&q| {
+            let p = &scene.polygons[q];
+            let pe = &mesh.patches[q];
+            !p.back_side
+                && pe.count > 0
+                && scene.materials[p.material as usize].is_emitter()
+                && (pe.first..pe.first + pe.count).all(|i| receivers.open_fraction[i as usize] <= 0.0)
+        })
+        .collect();
+    if covered.is_empty() {
+        return None;
+    }
+    let places: Vec<String> = covered.iter().take(3).map(|&q| element_place(scene, mesh, mesh.patches[q].first as usize)).collect();
+    let (what, them, it) = if covered.len() == 1 {
+        ("1 emitting polygon lies wholly inside closed geometry and lights nothing".to_string(), "it", "it")
+    } else {
+        (format!("{} emitting polygons lie wholly inside closed geometry and light nothing", covered.len()), "them", "they")
+    };
+    Some(format!(
+        "{what} ({}{}): every probe ray from {them} meets the back of a surface first; if {it} should light the scene, \
+         check the winding of the surfaces around {them}",
+        places.join(", "),
+        if covered.len() > 3 { ", …" } else { "" }
+    ))
 }
 
 /// Meshes, builds the BVH, computes form factors (not for the stochastic solvers) and

@@ -535,6 +535,21 @@ fn lamp_inside_a_room_wound_outward_is_an_error_naming_the_lamp() {
             }
         }
     }
+    // The inward room lit, and a second lamp shut in a small box whose faces point
+    // outward: solved, with a warning that names the shut-in lamp.
+    let boxed = "v 0.1 0.1 0\nv 0.3 0.1 0\nv 0.3 0.3 0\nv 0.1 0.3 0\nv 0.1 0.1 0.2\nv 0.3 0.1 0.2\nv 0.3 0.3 0.2\nv 0.1 0.3 0.2\n\
+                 v 0.15 0.15 0.1\nv 0.25 0.15 0.1\nv 0.25 0.25 0.1\nv 0.15 0.25 0.1\n";
+    let boxed_faces: String = outward.iter().map(|f| format!("f {}\n", f.split(' ').map(|k| (k.parse::<u32>().unwrap() + 12).to_string()).collect::<Vec<_>>().join(" "))).collect();
+    let text = format!(
+        "mtllib outroom.mtl\n{corners}{boxed}usemtl grey\n{}{boxed_faces}usemtl lamp\nf 9 10 11 12\nf 21 22 23 24\n",
+        faces(true)
+    );
+    let sc = Scene::from_desc(scene::load(write("boxedlamp.obj", &text).to_str().unwrap()).unwrap()).unwrap();
+    let s = solve_scene(sc, &Settings { mesh_size: Some(0.05), ..Default::default() }, &radiosity::NoProgress).unwrap();
+    let shut = format!("{}:41", tmp("boxedlamp.obj").display());
+    let w: Vec<&String> = s.warnings.iter().filter(|w| w.contains("inside closed geometry")).collect();
+    assert!(w.len() == 1 && w[0].contains(&shut) && w[0].starts_with("1 emitting polygon lies"), "{:?}", s.warnings);
+    assert!(s.energy().emitted[1] > 0.0);
 }
 
 #[test]
