@@ -765,6 +765,7 @@ mod tests {
         o.add("-o", &fifo);
         let err = o.check().unwrap_err().to_string();
         assert!(err.contains("-o") && err.contains("not a regular file"), "{err}");
+        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]

@@ -13,8 +13,10 @@ fn data(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../radiosity/tests/data").join(name).to_string_lossy().into()
 }
 
+/// A file in this target's own scratch folder (under target/, not left in the system's
+/// temporary folder after every run).
 fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("radiosity-vf-{}", std::process::id()));
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("viewfactors");
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
 }

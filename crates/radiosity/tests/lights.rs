@@ -349,6 +349,7 @@ fn rect_light_from_toml_lights_the_floor_below_by_its_view_factor() {
     let up = radiosity::scene::load_scene(dir.join("up.toml").to_str().unwrap()).unwrap();
     let solved = solve_scene(up, &Settings { mesh_size: Some(0.25), ..Default::default() }, &NoProgress).unwrap();
     assert!(solved.objects().iter().find(|o| o.name != "panel").unwrap().radiance_rgb[0] == 0.0);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A lamp put inside a block by mistake (an open-bottomed box on the floor) lights nothing,

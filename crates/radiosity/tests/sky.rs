@@ -523,6 +523,7 @@ fn environment_files_load_from_toml_with_clear_errors() {
     img.pixels[5] = Rgb::new(f64::NAN, 0.0, 0.0);
     std::fs::write(dir.join("nan.exr"), radiosity::output::exr::encode(&img).unwrap()).unwrap();
     bad("image = \"nan.exr\"", "texel (1, 1)");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Sky portals change the noise, not the light. The floor of an open unit box with black

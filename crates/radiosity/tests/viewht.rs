@@ -70,6 +70,7 @@ fn parallel_planes_with_temperatures_match_the_grey_network_and_balance() {
     let (mut desc, _) = vs3::read_vs3(&data("ParallelPlanes.vs3")).unwrap();
     let tf = temperature_file("pp.txt", "1 1 400 ! bottom\n2 2 300\n0 0\n");
     let t = load_temperatures(&tf, surface_objects(&desc).len()).unwrap();
+    let _ = std::fs::remove_file(&tf);
     set_temperatures(&mut desc, &t).unwrap();
     // Open geometry: the balance closes as far as the factors are reciprocal (exact here).
     let mut s = settings(None, false);
@@ -96,6 +97,7 @@ fn box345_with_a_viewht_temperature_file_balances() {
     // ViewHT style: a range past the last surface stops there; later lines win.
     let tf = temperature_file("box.txt", "1 999 300 ! every surface\n1 10 350\n0 0\n");
     let t = load_temperatures(&tf, n).unwrap();
+    let _ = std::fs::remove_file(&tf);
     assert!(t.iter().all(Option::is_some) && t[9] == Some(350.0) && t[10] == Some(300.0));
     set_temperatures(&mut desc, &t).unwrap();
     let th = solve(Scene::from_desc(desc).unwrap(), &settings(Some(1.0), true), &NoProgress).unwrap();
