@@ -373,7 +373,7 @@ impl Prepared {
             if progress.should_stop() {
                 return Err(Error::Cancelled);
             }
-            check_emitters_open(scene, mesh, &receivers)?;
+            check_emitters_open(scene, mesh, rays, &receivers)?;
             let t_sky = Instant::now();
             self.external_irradiance = external_irradiance(scene, mesh, rays, &receivers, progress)?;
             let sky_seconds = t_sky.elapsed().as_secs_f64();
@@ -610,35 +610,49 @@ pub fn check_transport(solver: Solver, kind: transport::Kind) -> Result<()> {
 
 /// Refuses a scene whose only light is emitting polygons that the coverage test found
 /// wholly covered (inside closed geometry: every probe from them meets the back of a
-/// surface). They emit nothing, the solution is black, and the energy line and relative
-/// residuals divide by an emitted power of zero: a lamp in a closed room whose walls face
-/// outward, one-sided, wrote a black image with "emitted 0" and exit 0, and with
-/// `--two-sided` (where the generated back copies face inward, and inside a closed box
-/// still counts as inside) every solver "diverged" with a residual of infinity naming the
-/// lamp, and `--solver direct` printed "absorbed inf %".
-fn check_emitters_open(scene: &Scene, mesh: &Mesh, receivers: &Receivers) -> Result<()> {
-    if scene.lit_sky().is_some() || !scene.lights.is_empty() {
+/// surface) and point or spot lights inside closed geometry. They light nothing, the
+/// solution is black, and the energy line and relative residuals divide by an emitted
+/// power of zero: a lamp in a closed room whose walls face outward, one-sided, wrote a
+/// black image with "emitted 0" and exit 0, and with `--two-sided` (where the generated
+/// back copies face inward, and inside a closed box still counts as inside) every solver
+/// "diverged" with a residual of infinity naming the lamp, and `--solver direct` printed
+/// "absorbed inf %"; a point light alone in such a room gave "emitted 0", exit 0.
+fn check_emitters_open(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers) -> Result<()> {
+    if scene.lit_sky().is_some() {
         return Ok(());
     }
     let (_, emission) = element_materials(scene, mesh);
-    let mut emitting = (0..mesh.len()).filter(|&i| emission[i].max_element() > 0.0).peekable();
-    if emitting.peek().is_none() || (0..mesh.len()).any(|i| emission[i].max_element() > 0.0 && receivers.open_fraction[i] > 0.0) {
+    let emitting: Vec<usize> = (0..mesh.len()).filter(|&i| emission[i].max_element() > 0.0).collect();
+    if (emitting.is_empty() && scene.lights.is_empty()) || emitting.iter().any(|&i| receivers.open_fraction[i] > 0.0) {
+        return Ok(());
+    }
+    if scene.lights.iter().any(|l| !crate::lights::enclosed(scene, rays, l)) {
         return Ok(());
     }
     let mut places: Vec<String> = Vec::new();
     let mut seen = std::collections::HashSet::new();
-    for i in emitting {
+    for &i in &emitting {
         if seen.insert(mesh.elements[i].patch) && places.len() < 3 {
             places.push(element_place(scene, mesh, i));
         }
     }
+    for l in &scene.lights {
+        if places.len() < 3 {
+            let at = l.loc.as_ref().map_or(String::new(), |loc| format!("{loc}: "));
+            places.push(format!("{at}light '{}'", l.name));
+        }
+    }
+    let (what, them) = match (emitting.is_empty(), scene.lights.is_empty()) {
+        (false, true) => ("every emitting polygon lies", "them"),
+        (true, false) => ("every light lies", "them"),
+        _ => ("every emitting polygon and every light lie", "them"),
+    };
     Err(Error::Invalid(format!(
-        "every emitting polygon lies inside closed geometry, so no light leaves it ({}{}): every probe ray from \
-         them meets the back of a surface first. Are the surfaces around them wound facing away from them (a room \
-         whose walls face outward reads as a solid box, also with --two-sided)? Reverse their winding so that they \
-         face the lamps",
+        "{what} inside closed geometry, so no light leaves it ({}{}): every probe ray from {them} meets the back of \
+         a surface first. Are the surfaces around {them} wound facing away from {them} (a room whose walls face \
+         outward reads as a solid box, also with --two-sided)? Reverse their winding so that they face the lights",
         places.join(", "),
-        if seen.len() > 3 { ", …" } else { "" }
+        if seen.len() + scene.lights.len() > 3 { ", …" } else { "" }
     )))
 }
 

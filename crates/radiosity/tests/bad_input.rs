@@ -535,6 +535,26 @@ fn lamp_inside_a_room_wound_outward_is_an_error_naming_the_lamp() {
             }
         }
     }
+    // A point light alone in the room: the same error, naming the light, when the walls
+    // face outward; lit when they face inward.
+    for (name, flip) in [("outbulb", false), ("inbulb", true)] {
+        write(&format!("{name}.obj"), format!("mtllib outroom.mtl\n{corners}usemtl grey\n{}", faces(flip)));
+        let toml = write(
+            &format!("{name}.toml"),
+            format!("mesh = \"{name}.obj\"\n[[lights]]\ntype = \"point\"\nname = \"bulb\"\nposition = [0.5, 0.5, 0.5]\nintensity = 10\n"),
+        );
+        let sc = Scene::from_desc(scene::load(toml.to_str().unwrap()).unwrap()).unwrap();
+        let r = solve_scene(sc, &Settings { mesh_size: Some(0.1), ..Default::default() }, &radiosity::NoProgress);
+        match (flip, r) {
+            (false, Err(e)) => {
+                let e = e.to_string();
+                assert!(e.contains("every light lies inside closed geometry") && e.contains("light 'bulb'") && e.contains(&format!("{name}.toml:2")), "{e}");
+            }
+            (false, Ok(_)) => panic!("{name}: solved in the dark"),
+            (true, Ok(s)) => assert!(s.energy().emitted[1] > 0.0, "{name}"),
+            (true, Err(e)) => panic!("{name}: {e}"),
+        }
+    }
     // The inward room lit, and a second lamp shut in a small box whose faces point
     // outward: solved, with a warning that names the shut-in lamp.
     let boxed = "v 0.1 0.1 0\nv 0.3 0.1 0\nv 0.3 0.3 0\nv 0.1 0.3 0\nv 0.1 0.1 0.2\nv 0.3 0.1 0.2\nv 0.3 0.3 0.2\nv 0.1 0.3 0.2\n\
