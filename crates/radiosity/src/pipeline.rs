@@ -536,10 +536,9 @@ impl Prepared {
         form_factor::push_warning(crate::back_faces::two_sided_emitter_warning(&self.scene, &solution.energy), progress, &mut warnings);
         form_factor::push_warning(covered_emitters_warning(&self.scene, &self.mesh, &self.receivers), progress, &mut warnings);
         for l in self.scene.lights.iter().filter(|l| crate::lights::enclosed(&self.scene, &self.rays, l)) {
-            let at = l.loc.as_ref().map_or(String::new(), |loc| format!("{loc}: "));
             let w = format!(
-                "{at}light '{}' is inside closed geometry (every ray from it meets the back of a surface): its light reaches no surface",
-                l.name
+                "{} is inside closed geometry (every ray from it meets the back of a surface): its light reaches no surface",
+                light_place(l)
             );
             form_factor::push_warning(Some(w), progress, &mut warnings);
         }
@@ -636,24 +635,25 @@ fn check_emitters_open(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: 
             places.push(element_place(scene, mesh, i));
         }
     }
-    for l in &scene.lights {
-        if places.len() < 3 {
-            let at = l.loc.as_ref().map_or(String::new(), |loc| format!("{loc}: "));
-            places.push(format!("{at}light '{}'", l.name));
-        }
-    }
-    let (what, them) = match (emitting.is_empty(), scene.lights.is_empty()) {
-        (false, true) => ("every emitting polygon lies", "them"),
-        (true, false) => ("every light lies", "them"),
-        _ => ("every emitting polygon and every light lie", "them"),
+    places.extend(scene.lights.iter().take(3 - places.len()).map(light_place));
+    let what = match (emitting.is_empty(), scene.lights.is_empty()) {
+        (false, true) => "every emitting polygon lies",
+        (true, false) => "every light lies",
+        _ => "every emitting polygon and every light lie",
     };
     Err(Error::Invalid(format!(
-        "{what} inside closed geometry, so no light leaves it ({}{}): every probe ray from {them} meets the back of \
-         a surface first. Are the surfaces around {them} wound facing away from {them} (a room whose walls face \
+        "{what} inside closed geometry, so no light leaves it ({}{}): every probe ray from them meets the back of \
+         a surface first. Are the surfaces around them wound facing away from them (a room whose walls face \
          outward reads as a solid box, also with --two-sided)? Reverse their winding so that they face the lights",
         places.join(", "),
         if seen.len() + scene.lights.len() > 3 { ", …" } else { "" }
     )))
+}
+
+/// A light named with where it was given: `file:line: light 'name'`.
+fn light_place(l: &crate::scene::Light) -> String {
+    let at = l.loc.as_ref().map_or(String::new(), |loc| format!("{loc}: "));
+    format!("{at}light '{}'", l.name)
 }
 
 /// A warning naming the emitting polygons (input sides; generated back copies aside) that

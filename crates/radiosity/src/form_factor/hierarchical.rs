@@ -1830,9 +1830,10 @@ impl Ctx<'_> {
         // lamp's back side holds most of a ceiling node's light in a spot the lamp hides
         // from the room; area-uniform rays rarely met that spot, the link was kept whole at
         // the ceiling's mean visibility, and it carried the spot's light past the lamp.
-        let pick_s = |k: u32, u: f64| match &self.light_prefix {
-            Some(p) if self.node(k).surface => &self.samples[self.tree.slot_by(p, k, u)],
-            _ => pick(k, u),
+        let light = self.light_prefix.as_deref().filter(|_| self.node(s).surface);
+        let pick_s = |k: u32, u: f64| match light {
+            Some(p) => &self.samples[self.tree.slot_by(p, k, u)],
+            None => pick(k, u),
         };
         for t in 0..m {
             let ur = (t as f64 + rng.random::<f64>()) / m as f64;
