@@ -166,6 +166,9 @@ struct Prepared {
     refine_rays: u64,
     /// The operator kind in use ([`resolve_transport`]).
     kind: transport::Kind,
+    /// True when every light lay inside closed two-sided geometry and the coverage test
+    /// was turned off for it ([`enclosure_as_room`]): the warning it gave, once.
+    room_note: Option<String>,
 }
 
 fn prepare(
@@ -252,6 +255,7 @@ fn prepare(
         refinement,
         refine_rays,
         kind,
+        room_note: None,
     };
     Ok((prepared.with_factors(settings, form_factors, progress)?, refiner))
 }
@@ -369,11 +373,22 @@ impl Prepared {
                 predicted_peak = Some(peak);
                 tree = Some(built);
             }
-            let receivers = Receivers::compute_with(scene, mesh, rays, progress);
+            let mut receivers = Receivers::compute_with(scene, mesh, rays, progress);
             if progress.should_stop() {
                 return Err(Error::Cancelled);
             }
-            check_emitters_open(scene, mesh, rays, &receivers)?;
+            if let Some(shut) = shut_in_lights(scene, mesh, rays, &receivers) {
+                let Some(w) = enclosure_as_room(scene, &shut) else {
+                    return Err(shut.error());
+                };
+                let probed = receivers.rays;
+                receivers = Receivers::all_open(mesh);
+                receivers.rays = probed;
+                if self.room_note.is_none() {
+                    progress.warning(&w);
+                    self.room_note = Some(w);
+                }
+            }
             let t_sky = Instant::now();
             self.external_irradiance = external_irradiance(scene, mesh, rays, &receivers, progress)?;
             let sky_seconds = t_sky.elapsed().as_secs_f64();
@@ -535,7 +550,10 @@ impl Prepared {
         form_factor::push_warning(crate::back_faces::created_warning(&solution.energy, cause), progress, &mut warnings);
         form_factor::push_warning(crate::back_faces::two_sided_emitter_warning(&self.scene, &solution.energy), progress, &mut warnings);
         form_factor::push_warning(covered_emitters_warning(&self.scene, &self.mesh, &self.receivers), progress, &mut warnings);
-        for l in self.scene.lights.iter().filter(|l| crate::lights::enclosed(&self.scene, &self.rays, l)) {
+        if let Some(w) = &self.room_note {
+            warnings.push(w.clone()); // said when it was decided
+        }
+        for l in self.scene.lights.iter().filter(|l| self.room_note.is_none() && crate::lights::enclosed(&self.scene, &self.rays, l)) {
             let w = format!(
                 "{} is inside closed geometry (every ray from it meets the back of a surface): its light reaches no surface",
                 light_place(l)
@@ -616,21 +634,22 @@ pub fn check_transport(solver: Solver, kind: transport::Kind) -> Result<()> {
 /// back copies face inward, and inside a closed box still counts as inside) every solver
 /// "diverged" with a residual of infinity naming the lamp, and `--solver direct` printed
 /// "absorbed inf %"; a point light alone in such a room gave "emitted 0", exit 0.
-fn check_emitters_open(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers) -> Result<()> {
+fn shut_in_lights(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers) -> Option<ShutIn> {
     if scene.lit_sky().is_some() {
-        return Ok(());
+        return None;
     }
     let (_, emission) = element_materials(scene, mesh);
     let emitting: Vec<usize> = (0..mesh.len()).filter(|&i| emission[i].max_element() > 0.0).collect();
     if (emitting.is_empty() && scene.lights.is_empty()) || emitting.iter().any(|&i| receivers.open_fraction[i] > 0.0) {
-        return Ok(());
+        return None;
     }
     if scene.lights.iter().any(|l| !crate::lights::enclosed(scene, rays, l)) {
-        return Ok(());
+        return None;
     }
     let mut places: Vec<String> = Vec::new();
     let mut seen = std::collections::HashSet::new();
-    for &i in &emitting {
+    // Input sides only: a two-sided lamp's back copy is the same line of the file.
+    for &i in emitting.iter().filter(|&&i| !scene.polygons[mesh.elements[i].patch as usize].back_side) {
         if seen.insert(mesh.elements[i].patch) && places.len() < 3 {
             places.push(element_place(scene, mesh, i));
         }
@@ -641,13 +660,50 @@ fn check_emitters_open(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: 
         (true, false) => "every light lies",
         _ => "every emitting polygon and every light lie",
     };
-    Err(Error::Invalid(format!(
-        "{what} inside closed geometry, so no light leaves it ({}{}): every probe ray from them meets the back of \
-         a surface first. Are the surfaces around them wound facing away from them (a room whose walls face \
-         outward reads as a solid box, also with --two-sided)? Reverse their winding so that they face the lights",
-        places.join(", "),
-        if seen.len() + scene.lights.len() > 3 { ", …" } else { "" }
-    )))
+    let more = if seen.len() + scene.lights.len() > 3 { ", …" } else { "" };
+    Some(ShutIn { what, places: format!("{}{more}", places.join(", ")) })
+}
+
+/// Lights that all lie inside closed geometry ([`shut_in_lights`]).
+struct ShutIn {
+    /// "every emitting polygon lies", "every light lies", …
+    what: &'static str,
+    /// The first few of them, `file:line` each.
+    places: String,
+}
+
+impl ShutIn {
+    /// The error that refuses the run.
+    fn error(&self) -> Error {
+        Error::Invalid(format!(
+            "{} inside closed geometry, so no light leaves it ({}): every probe ray from them meets the back of \
+             a surface first. Are the surfaces around them wound facing away from them (a room whose walls face \
+             outward reads as a solid box)? Reverse their winding so that they face the lights, or make every \
+             surface two-sided (--two-sided) to have the geometry taken as a room",
+            self.what, self.places
+        ))
+    }
+}
+
+/// Where every light lies inside closed geometry ([`shut_in_lights`]) and every surface
+/// that is not an emitter is two-sided, that geometry is a room wound outward, not a
+/// solid: with both sides of every wall a surface, "inside a closed shell" reads as inside
+/// a solid only by the input winding, which `--two-sided` is asked for to set aside (a
+/// RenderPark-style model with most polygons wound backwards). The coverage test is then
+/// turned off for the run — every element open, as for the stochastic solvers, which skip
+/// it — and this returns the warning that says so (None: the run is refused).
+fn enclosure_as_room(scene: &Scene, shut: &ShutIn) -> Option<String> {
+    let mut surfaces = scene.polygons.iter().filter(|p| !p.back_side && !scene.materials[p.material as usize].is_emitter()).peekable();
+    if surfaces.peek().is_none() || !surfaces.all(|p| p.two_sided) {
+        return None;
+    }
+    Some(format!(
+        "{} inside closed geometry whose faces point away from them ({}); with every surface two-sided it is \
+         taken as the room around them, not a solid, and the coverage test (the parts of surfaces inside solids, \
+         such as a box's underside on the floor) is off for this run: wind the room's faces towards the lights to \
+         have it",
+        shut.what, shut.places
+    ))
 }
 
 /// A light named with where it was given: `file:line: light 'name'`.
@@ -659,7 +715,8 @@ fn light_place(l: &crate::scene::Light) -> String {
 /// A warning naming the emitting polygons (input sides; generated back copies aside) that
 /// the coverage test found wholly covered while others emit: inside closed geometry, they
 /// light nothing (a lamp inside a closed box whose faces point outward reads as inside a
-/// solid). [`check_emitters_open`] refuses the run when none is left.
+/// solid). [`shut_in_lights`] refuses the run when none is left (unless every surface is
+/// two-sided, [`enclosure_as_room`]).
 fn covered_emitters_warning(scene: &Scene, mesh: &Mesh, receivers: &Receivers) -> Option<String> {
     if receivers.open_fraction.is_empty() {
         return None;

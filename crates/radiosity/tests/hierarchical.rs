@@ -1546,12 +1546,19 @@ fn link_truth() {
                     ns.lo, ns.hi, front.0, front.1 / front.0.max(1e-30), behind.0, behind.1 / behind.0.max(1e-30), full.3, full.1 / full.3.max(1e-30)
                 );
             }
+            // A leaf source: its element's polygon (file:line) and normal.
+            let leaf_src = (ns.count == 1).then(|| {
+                let j = tree.order[ns.first as usize] as usize;
+                let q = &sol.scene.polygons[sol.mesh.elements[j].patch as usize];
+                format!(" element {j} at {:?} normal {:.3?} back {}", q.loc, q.normal, q.back_side)
+            });
             println!(
-                "   src {s} surface {} count {} size {:.2} dist {:.2}: link {l:.5} mc {m:.5}",
+                "   src {s} surface {} count {} size {:.2} dist {:.2}: link {l:.5} mc {m:.5}{}",
                 ns.surface,
                 ns.count,
                 ns.size(),
-                (ns.centroid.as_dvec3() - e.centroid).length()
+                (ns.centroid.as_dvec3() - e.centroid).length(),
+                leaf_src.unwrap_or_default()
             );
         }
         for (s, l, m) in &by {
@@ -2056,7 +2063,7 @@ fn coarse_links_near_the_minimum_size_keep_the_light_of_split_ones() {
 /// elements (`RAYS` per element) whose first hit is a front face; then the object pairs
 /// whose delivered power differs most from the rays'. `WEIGHT=solution`: each element's
 /// light is its solved radiosity (emitters included, through the direct columns), as in
-/// the energy line's `arriving`.
+/// the energy line's `arriving`. `DIRECT=0` sends the emitted light through the links too.
 #[test]
 #[ignore]
 fn columns_against_rays() {
@@ -2079,6 +2086,8 @@ fn columns_against_rays() {
         s.links.coarse_size = c;
     }
     s.links.closure_rays = env_f("CLOSURE").map(|c| c as usize);
+    // `DIRECT=0`: emitted light through the links too (`--emitters-in-links`).
+    s.links.direct_columns = std::env::var("DIRECT").map_or(true, |v| v != "0");
     let sol = solve_scene(scene, &s, &NoProgress).unwrap();
     let op = sol.transport.as_ref().unwrap();
     let n = sol.mesh.len();
