@@ -146,8 +146,10 @@ pub fn element_irradiance(
 /// enclosed (the floor under a box without a bottom: every probe from there meets the box's
 /// back faces, as the coverage test of [`crate::mesh::Receivers`] decides), so its light
 /// reaches no open surface (a lamp placed inside a block by mistake). Never for a
-/// directional light.
-pub fn enclosed(scene: &Scene, rays: &SceneRays, light: &Light) -> bool {
+/// directional light. `room`: per polygon, the back copies of shells that lights see from
+/// inside ([`crate::mesh::coverage::room_shells`], [`crate::mesh::Receivers::room`]), which
+/// are surfaces, not the inside of a solid (empty: none).
+pub fn enclosed(scene: &Scene, rays: &SceneRays, light: &Light, room: &[bool]) -> bool {
     let (LightKind::Point { position } | LightKind::Spot { position, .. }) = light.kind else {
         return false;
     };
@@ -159,16 +161,12 @@ pub fn enclosed(scene: &Scene, rays: &SceneRays, light: &Light) -> bool {
     ) {
         Some((hit, q)) => {
             let p = &scene.polygons[q as usize];
-            Err((p.back_side || p.normal.dot(dir) > 0.0, hit.t as f64, q))
+            let room = room.get(q as usize).copied().unwrap_or(false);
+            Err(((p.back_side && !room) || p.normal.dot(dir) > 0.0, hit.t as f64, q))
         }
         None => Ok(()),
     };
-    let sphere = |k: usize, n: usize| {
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        let z = 1.0 - (2.0 * k as f64 + 1.0) / n as f64;
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        DVec3::new(r * (golden * k as f64).cos(), r * (golden * k as f64).sin(), z)
-    };
+    let sphere = |k: usize, n: usize| crate::sampling::fibonacci_sphere(k as u32, n as u32);
     const PROBES: usize = 64;
     (0..PROBES).all(|k| {
         let dir = sphere(k, PROBES);

@@ -166,9 +166,6 @@ struct Prepared {
     refine_rays: u64,
     /// The operator kind in use ([`resolve_transport`]).
     kind: transport::Kind,
-    /// True when every light lay inside closed two-sided geometry and the coverage test
-    /// was turned off for it ([`enclosure_as_room`]): the warning it gave, once.
-    room_note: Option<String>,
 }
 
 fn prepare(
@@ -255,7 +252,6 @@ fn prepare(
         refinement,
         refine_rays,
         kind,
-        room_note: None,
     };
     Ok((prepared.with_factors(settings, form_factors, progress)?, refiner))
 }
@@ -373,21 +369,12 @@ impl Prepared {
                 predicted_peak = Some(peak);
                 tree = Some(built);
             }
-            let mut receivers = Receivers::compute_with(scene, mesh, rays, progress);
+            let receivers = Receivers::compute_with(scene, mesh, rays, progress);
             if progress.should_stop() {
                 return Err(Error::Cancelled);
             }
             if let Some(shut) = shut_in_lights(scene, mesh, rays, &receivers) {
-                let Some(w) = enclosure_as_room(scene, &shut) else {
-                    return Err(shut.error());
-                };
-                let probed = receivers.rays;
-                receivers = Receivers::all_open(mesh);
-                receivers.rays = probed;
-                if self.room_note.is_none() {
-                    progress.warning(&w);
-                    self.room_note = Some(w);
-                }
+                return Err(shut.error());
             }
             let t_sky = Instant::now();
             self.external_irradiance = external_irradiance(scene, mesh, rays, &receivers, progress)?;
@@ -550,10 +537,7 @@ impl Prepared {
         form_factor::push_warning(crate::back_faces::created_warning(&solution.energy, cause), progress, &mut warnings);
         form_factor::push_warning(crate::back_faces::two_sided_emitter_warning(&self.scene, &solution.energy), progress, &mut warnings);
         form_factor::push_warning(covered_emitters_warning(&self.scene, &self.mesh, &self.receivers), progress, &mut warnings);
-        if let Some(w) = &self.room_note {
-            warnings.push(w.clone()); // said when it was decided
-        }
-        for l in self.scene.lights.iter().filter(|l| self.room_note.is_none() && crate::lights::enclosed(&self.scene, &self.rays, l)) {
+        for l in self.scene.lights.iter().filter(|l| crate::lights::enclosed(&self.scene, &self.rays, l, &self.receivers.room)) {
             let w = format!(
                 "{} is inside closed geometry (every ray from it meets the back of a surface): its light reaches no surface",
                 light_place(l)
@@ -625,15 +609,16 @@ pub fn check_transport(solver: Solver, kind: transport::Kind) -> Result<()> {
     Ok(())
 }
 
-/// Refuses a scene whose only light is emitting polygons that the coverage test found
-/// wholly covered (inside closed geometry: every probe from them meets the back of a
-/// surface) and point or spot lights inside closed geometry. They light nothing, the
-/// solution is black, and the energy line and relative residuals divide by an emitted
-/// power of zero: a lamp in a closed room whose walls face outward, one-sided, wrote a
-/// black image with "emitted 0" and exit 0, and with `--two-sided` (where the generated
-/// back copies face inward, and inside a closed box still counts as inside) every solver
-/// "diverged" with a residual of infinity naming the lamp, and `--solver direct` printed
-/// "absorbed inf %"; a point light alone in such a room gave "emitted 0", exit 0.
+/// The lights of a scene whose only light is emitting polygons that the coverage test
+/// found wholly covered (inside closed geometry: every probe from them meets the back of a
+/// surface) and point or spot lights inside closed geometry; the run is refused
+/// ([`ShutIn::error`]). They light nothing, the solution is black, and the energy line and
+/// relative residuals divide by an emitted power of zero: a lamp in a closed room whose
+/// walls face outward, one-sided, wrote a black image with "emitted 0" and exit 0, and
+/// with `--two-sided` (before a closed two-sided shell holding a light was a room,
+/// [`crate::mesh::coverage::room_shells`]) every solver "diverged" with a residual of
+/// infinity naming the lamp, and `--solver direct` printed "absorbed inf %"; a point
+/// light alone in such a room gave "emitted 0", exit 0.
 fn shut_in_lights(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers) -> Option<ShutIn> {
     if scene.lit_sky().is_some() {
         return None;
@@ -643,7 +628,7 @@ fn shut_in_lights(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Rece
     if (emitting.is_empty() && scene.lights.is_empty()) || emitting.iter().any(|&i| receivers.open_fraction[i] > 0.0) {
         return None;
     }
-    if scene.lights.iter().any(|l| !crate::lights::enclosed(scene, rays, l)) {
+    if scene.lights.iter().any(|l| !crate::lights::enclosed(scene, rays, l, &receivers.room)) {
         return None;
     }
     let mut places: Vec<String> = Vec::new();
@@ -678,32 +663,11 @@ impl ShutIn {
         Error::Invalid(format!(
             "{} inside closed geometry, so no light leaves it ({}): every probe ray from them meets the back of \
              a surface first. Are the surfaces around them wound facing away from them (a room whose walls face \
-             outward reads as a solid box)? Reverse their winding so that they face the lights, or make every \
-             surface two-sided (--two-sided) to have the geometry taken as a room",
+             outward reads as a solid box)? Reverse their winding so that they face the lights, or make them \
+             two-sided (--two-sided): a closed two-sided shell that holds a light is a room",
             self.what, self.places
         ))
     }
-}
-
-/// Where every light lies inside closed geometry ([`shut_in_lights`]) and every surface
-/// that is not an emitter is two-sided, that geometry is a room wound outward, not a
-/// solid: with both sides of every wall a surface, "inside a closed shell" reads as inside
-/// a solid only by the input winding, which `--two-sided` is asked for to set aside (a
-/// RenderPark-style model with most polygons wound backwards). The coverage test is then
-/// turned off for the run — every element open, as for the stochastic solvers, which skip
-/// it — and this returns the warning that says so (None: the run is refused).
-fn enclosure_as_room(scene: &Scene, shut: &ShutIn) -> Option<String> {
-    let mut surfaces = scene.polygons.iter().filter(|p| !p.back_side && !scene.materials[p.material as usize].is_emitter()).peekable();
-    if surfaces.peek().is_none() || !surfaces.all(|p| p.two_sided) {
-        return None;
-    }
-    Some(format!(
-        "{} inside closed geometry whose faces point away from them ({}); with every surface two-sided it is \
-         taken as the room around them, not a solid, and the coverage test (the parts of surfaces inside solids, \
-         such as a box's underside on the floor) is off for this run: wind the room's faces towards the lights to \
-         have it",
-        shut.what, shut.places
-    ))
 }
 
 /// A light named with where it was given: `file:line: light 'name'`.
@@ -715,8 +679,7 @@ fn light_place(l: &crate::scene::Light) -> String {
 /// A warning naming the emitting polygons (input sides; generated back copies aside) that
 /// the coverage test found wholly covered while others emit: inside closed geometry, they
 /// light nothing (a lamp inside a closed box whose faces point outward reads as inside a
-/// solid). [`shut_in_lights`] refuses the run when none is left (unless every surface is
-/// two-sided, [`enclosure_as_room`]).
+/// solid). [`shut_in_lights`] refuses the run when none is left.
 fn covered_emitters_warning(scene: &Scene, mesh: &Mesh, receivers: &Receivers) -> Option<String> {
     if receivers.open_fraction.is_empty() {
         return None;

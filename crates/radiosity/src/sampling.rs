@@ -133,6 +133,15 @@ impl SphericalTriangle {
     }
 }
 
+/// Direction `k` of `m` spread evenly over the unit sphere (a Fibonacci lattice: equal-area
+/// bands in z, the golden angle between consecutive points).
+pub fn fibonacci_sphere(k: u32, m: u32) -> glam::DVec3 {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let z = 1.0 - (2.0 * k as f64 + 1.0) / m as f64;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    glam::DVec3::new(r * (golden * k as f64).cos(), r * (golden * k as f64).sin(), z)
+}
+
 #[cfg(test)]
 mod tests {
     use glam::DVec3;
@@ -175,3 +184,4 @@ mod tests {
         }
     }
 }
+

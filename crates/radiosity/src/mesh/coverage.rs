@@ -57,6 +57,9 @@ pub struct Receivers {
     pub open_cells: Vec<u64>,
     /// Probe rays cast.
     pub rays: u64,
+    /// Per polygon: true for the back copies of a shell that a light sees from inside (a
+    /// room, not a solid: see [`room_shells`]); empty when there is none.
+    pub room: Vec<bool>,
 }
 
 impl Receivers {
@@ -86,7 +89,7 @@ impl Receivers {
                 lv
             })
             .collect();
-        Receivers { points, open_fraction: vec![1.0; mesh.len()], open_cells: vec![u64::MAX; mesh.len()], rays: 0 }
+        Receivers { points, open_fraction: vec![1.0; mesh.len()], open_cells: vec![u64::MAX; mesh.len()], rays: 0, room: Vec::new() }
     }
 
     /// True if the point of element `e` at (u, v) lies in an open cell.
@@ -145,7 +148,7 @@ impl Receivers {
     /// skipped once `progress` asks to stop, and the caller is expected to check it).
     pub fn compute_with(scene: &Scene, mesh: &Mesh, rays: &SceneRays, progress: &dyn crate::Progress) -> Receivers {
         let diag = scene.diagonal().max(f64::MIN_POSITIVE);
-        let probe = Probe { scene, rays, diag, lone_emitter: lone_emitters(scene) };
+        let probe = Probe { scene, rays, diag, lone_emitter: lone_emitters(scene), room: room_shells(scene, rays) };
         progress.begin("coverage", mesh.len() as u64);
         let done = std::sync::atomic::AtomicU64::new(0);
         let res: Vec<([Vec<DVec3>; MAX_K], f64, u64, u64)> = mesh
@@ -297,7 +300,7 @@ impl Receivers {
             open_fraction.push(f);
             open_cells.push(c);
         }
-        Receivers { points, open_fraction, open_cells, rays }
+        Receivers { points, open_fraction, open_cells, rays, room: probe.room }
     }
 }
 
@@ -381,6 +384,151 @@ struct Probe<'a> {
     rays: &'a SceneRays,
     diag: f64,
     lone_emitter: Vec<bool>,
+    /// Per polygon: true for the generated back copies of a shell that a light sees from
+    /// inside ([`room_shells`]; empty: none).
+    room: Vec<bool>,
+}
+
+/// Probe rays per light in [`room_shells`] that look for a back copy seen first.
+const ROOM_PROBES: u32 = 16;
+
+/// Most emitting polygons whose points [`room_shells`] probes from (evenly spread over
+/// them beyond this).
+const ROOM_EMITTERS: usize = 4096;
+
+/// Per polygon: true for the generated back copies of two-sided polygons in a shell (input
+/// polygons connected through shared edges) that holds a light: a ray from the light
+/// crosses it an odd number of times (in two of three directions). With every surface
+/// two-sided, "inside a closed shell" reads as inside a solid only by the input winding: a
+/// room wound outward (a model with most polygons wound backwards, which is what
+/// `--two-sided` is for) is a closed shell whose back copies face the lamps, and the
+/// coverage test found the lamps, the walls and the floor inside it, with boxes on the
+/// floor opening the few points that saw them (−17 % created in such a room with one
+/// box). A shell that holds a light is a room, not a solid: its back copies are surfaces,
+/// and a probe that meets one is open. Only shells whose back copies a light sees first
+/// are candidates (a room wound inward shows its lamps its fronts, and keeps its back
+/// copies, which face the void, as they were); a solid seen from outside is crossed an
+/// even number of times, however it is wound, so furniture wound backwards stays a solid.
+pub fn room_shells(scene: &Scene, rays: &SceneRays) -> Vec<bool> {
+    use std::collections::HashMap;
+    let n = scene.polygons.len();
+    if !scene.polygons.iter().any(|p| p.back_side) || scene.lit_sky().is_some() {
+        return Vec::new();
+    }
+    let diag = scene.diagonal().max(f64::MIN_POSITIVE);
+    // The lights' points: each emitting input polygon's centroid (just off its front; not
+    // the back copies, which inside a box that emits all over, as in a furnace, would make
+    // the box a room) and each point or spot light, with the polygon they start on.
+    let emitting: Vec<u32> = (0..n as u32)
+        .filter(|&q| {
+            let p = &scene.polygons[q as usize];
+            !p.back_side && scene.materials[p.material as usize].is_emitter()
+        })
+        .collect();
+    let step = emitting.len().div_ceil(ROOM_EMITTERS).max(1);
+    let mut sources: Vec<(DVec3, Option<u32>, DVec3)> = emitting
+        .iter()
+        .step_by(step)
+        .map(|&q| {
+            let p = &scene.polygons[q as usize];
+            (p.centroid() + p.normal * (1e-7 * diag), Some(q), p.normal)
+        })
+        .collect();
+    for l in &scene.lights {
+        if let crate::scene::LightKind::Point { position } | crate::scene::LightKind::Spot { position, .. } = l.kind {
+            sources.push((position, None, DVec3::ZERO));
+        }
+    }
+    // The back copies a light sees first (cosine probes about an emitter's normal, a
+    // sphere about a point light): only their shells can be rooms wound outward.
+    let mut seen_back: Vec<u32> = Vec::new();
+    for &(x, from, n) in &sources {
+        for k in 0..ROOM_PROBES {
+            let dir = if n == DVec3::ZERO {
+                crate::sampling::fibonacci_sphere(k, ROOM_PROBES)
+            } else {
+                let (t, b) = basis(n);
+                let (u1, u2) = halton2(k, (0.5 / ROOM_PROBES as f64, 0.25));
+                let d = cosine_hemisphere(u1, u2);
+                t * d.x + b * d.y + n * d.z
+            };
+            if let Some((_, q)) = rays.closest_facing(x.as_vec3(), dir.as_vec3(), f32::INFINITY, from) {
+                if scene.polygons[q as usize].back_side {
+                    seen_back.push(q);
+                }
+            }
+        }
+    }
+    if seen_back.is_empty() {
+        return Vec::new();
+    }
+    // Shells: polygons joined through shared edges (union–find; a back copy shares every
+    // edge with its front).
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            parent[x as usize] = parent[parent[x as usize] as usize];
+            x = parent[x as usize];
+        }
+        x
+    }
+    type Key = ([u64; 3], [u64; 3]);
+    let mut first: HashMap<Key, u32> = HashMap::new();
+    for (q, p) in scene.polygons.iter().enumerate() {
+        let v = &p.vertices;
+        for k in 0..v.len() {
+            let (a, b) = (v[k].to_array().map(super::uniform::round_key), v[(k + 1) % v.len()].to_array().map(super::uniform::round_key));
+            let key = if a <= b { (a, b) } else { (b, a) };
+            let other = *first.entry(key).or_insert(q as u32);
+            let (ra, rb) = (find(&mut parent, q as u32), find(&mut parent, other));
+            if ra != rb {
+                parent[ra as usize] = rb;
+            }
+        }
+    }
+    let mut candidate = vec![false; n];
+    for &q in &seen_back {
+        let r = find(&mut parent, q);
+        candidate[r as usize] = true;
+    }
+    // Crossings of each shell along three rays from every light (a two-sided pair is one
+    // crossing: the first hit skips the polygon it leaves and its twin).
+    const DIRS: [[f64; 3]; 3] = [[0.3107, 0.8713, 0.3797], [-0.7218, 0.1232, 0.6811], [0.4513, -0.5391, -0.7110]];
+    const MOST_HITS: usize = 4096;
+    let mut room_root = vec![false; n];
+    let mut odd: HashMap<u32, u32> = HashMap::new();
+    let mut parity: HashMap<u32, bool> = HashMap::new();
+    for &(x, from, _) in &sources {
+        odd.clear();
+        for d in DIRS {
+            let dir = DVec3::from_array(d).normalize();
+            parity.clear();
+            let (mut origin, mut skip) = (x, from);
+            for _ in 0..MOST_HITS {
+                let Some((hit, q)) = rays.closest_facing(origin.as_vec3(), dir.as_vec3(), f32::INFINITY, skip) else {
+                    break;
+                };
+                let r = find(&mut parent, q);
+                *parity.entry(r).or_default() ^= true;
+                origin += dir * f64::from(hit.t).max(1e-9 * diag);
+                skip = Some(q);
+            }
+            for (&r, &o) in &parity {
+                if o {
+                    *odd.entry(r).or_default() += 1;
+                }
+            }
+        }
+        for (&r, &k) in &odd {
+            if k >= 2 && candidate[r as usize] {
+                room_root[r as usize] = true;
+            }
+        }
+    }
+    if !room_root.contains(&true) {
+        return Vec::new();
+    }
+    (0..n as u32).map(|q| scene.polygons[q as usize].back_side && room_root[find(&mut parent, q) as usize]).collect()
 }
 
 /// Per polygon: true for an emitter with an edge that no other input polygon shares (a
@@ -435,6 +583,8 @@ fn covered_at(p: DVec3, n: DVec3, patch: u32, probe: &Probe, cast: &mut u64, nes
         // copy of a two-sided one (behind its input winding's front): inside a two-sided box
         // counts as inside, as for a one-sided one.
         match probe.rays.closest_facing(origin, dir.as_vec3(), f32::INFINITY, Some(patch)) {
+            // The inside of a shell that holds a light: a room's surface, open.
+            Some((_, q)) if probe.room.get(q as usize).copied().unwrap_or(false) => return false,
             Some((hit, q)) if scene.polygons[q as usize].back_side => {
                 // The back copy of a lone emitter (a lamp quad on its own, not a face of
                 // a closed solid) emits: the point is inside a solid only if that side is
