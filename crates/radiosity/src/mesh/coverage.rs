@@ -397,8 +397,10 @@ const ROOM_PROBES: u32 = 16;
 const ROOM_EMITTERS: usize = 4096;
 
 /// Per polygon: true for the generated back copies of two-sided polygons in a shell (input
-/// polygons connected through shared edges) that holds a light: a ray from the light
-/// crosses it an odd number of times (in two of three directions). With every surface
+/// polygons connected through shared edges) that holds a light: the light sees one of its
+/// back copies first, and rays from every one of the light's points (an emitting
+/// polygon's centroid and corners, pulled in) cross it an odd number of times (in two of
+/// three directions each). With every surface
 /// two-sided, "inside a closed shell" reads as inside a solid only by the input winding: a
 /// room wound outward (a model with most polygons wound backwards, which is what
 /// `--two-sided` is for) is a closed shell whose back copies face the lamps, and the
@@ -426,23 +428,29 @@ pub fn room_shells(scene: &Scene, rays: &SceneRays) -> Vec<bool> {
         })
         .collect();
     let step = emitting.len().div_ceil(ROOM_EMITTERS).max(1);
-    let mut sources: Vec<(DVec3, Option<u32>, DVec3)> = emitting
+    // Each light: where it starts (an emitting polygon's centroid and its corners pulled a
+    // tenth of the way in, just off its front; a point light's position), the polygon it
+    // starts on, and its normal (zero: all round).
+    let mut sources: Vec<(Vec<DVec3>, Option<u32>, DVec3)> = emitting
         .iter()
         .step_by(step)
         .map(|&q| {
             let p = &scene.polygons[q as usize];
-            (p.centroid() + p.normal * (1e-7 * diag), Some(q), p.normal)
+            let (c, off) = (p.centroid(), p.normal * (1e-7 * diag));
+            let points = std::iter::once(c).chain(p.vertices.iter().map(|&v| v + 0.1 * (c - v))).map(|x| x + off).collect();
+            (points, Some(q), p.normal)
         })
         .collect();
     for l in &scene.lights {
         if let crate::scene::LightKind::Point { position } | crate::scene::LightKind::Spot { position, .. } = l.kind {
-            sources.push((position, None, DVec3::ZERO));
+            sources.push((vec![position], None, DVec3::ZERO));
         }
     }
-    // The back copies a light sees first (cosine probes about an emitter's normal, a
-    // sphere about a point light): only their shells can be rooms wound outward.
-    let mut seen_back: Vec<u32> = Vec::new();
-    for &(x, from, n) in &sources {
+    // The back copies each light sees first (cosine probes about an emitter's normal from
+    // its centroid, a sphere about a point light): only their shells can be its room.
+    let mut seen_back: Vec<(usize, u32)> = Vec::new();
+    for (light, (points, from, n)) in sources.iter().enumerate() {
+        let (x, from, n) = (points[0], *from, *n);
         for k in 0..ROOM_PROBES {
             let dir = if n == DVec3::ZERO {
                 crate::sampling::fibonacci_sphere(k, ROOM_PROBES)
@@ -454,7 +462,7 @@ pub fn room_shells(scene: &Scene, rays: &SceneRays) -> Vec<bool> {
             };
             if let Some((_, q)) = rays.closest_facing(x.as_vec3(), dir.as_vec3(), f32::INFINITY, from) {
                 if scene.polygons[q as usize].back_side {
-                    seen_back.push(q);
+                    seen_back.push((light, q));
                 }
             }
         }
@@ -486,10 +494,10 @@ pub fn room_shells(scene: &Scene, rays: &SceneRays) -> Vec<bool> {
             }
         }
     }
-    let mut candidate = vec![false; n];
-    for &q in &seen_back {
+    let mut candidates: HashMap<usize, Vec<u32>> = HashMap::new();
+    for &(light, q) in &seen_back {
         let r = find(&mut parent, q);
-        candidate[r as usize] = true;
+        candidates.entry(light).or_default().push(r);
     }
     // Crossings of each shell along three rays from every light (a two-sided pair is one
     // crossing: the first hit skips the polygon it leaves and its twin).
@@ -498,29 +506,41 @@ pub fn room_shells(scene: &Scene, rays: &SceneRays) -> Vec<bool> {
     let mut room_root = vec![false; n];
     let mut odd: HashMap<u32, u32> = HashMap::new();
     let mut parity: HashMap<u32, bool> = HashMap::new();
-    for &(x, from, _) in &sources {
-        odd.clear();
-        for d in DIRS {
-            let dir = DVec3::from_array(d).normalize();
-            parity.clear();
-            let (mut origin, mut skip) = (x, from);
-            for _ in 0..MOST_HITS {
-                let Some((hit, q)) = rays.closest_facing(origin.as_vec3(), dir.as_vec3(), f32::INFINITY, skip) else {
-                    break;
-                };
-                let r = find(&mut parent, q);
-                *parity.entry(r).or_default() ^= true;
-                origin += dir * f64::from(hit.t).max(1e-9 * diag);
-                skip = Some(q);
-            }
-            for (&r, &o) in &parity {
-                if o {
-                    *odd.entry(r).or_default() += 1;
+    for (light, shells) in &mut candidates {
+        shells.sort_unstable();
+        shells.dedup();
+        // A candidate holds the light when every one of its points lies inside it: an
+        // emitting face that runs into another box (interpenetrating boxes in a furnace,
+        // every face emitting) has points on both sides, and that box stays a solid.
+        let (points, from, _) = &sources[*light];
+        let mut holds = vec![true; shells.len()];
+        for &x in points {
+            odd.clear();
+            for d in DIRS {
+                let dir = DVec3::from_array(d).normalize();
+                parity.clear();
+                let (mut origin, mut skip) = (x, *from);
+                for _ in 0..MOST_HITS {
+                    let Some((hit, q)) = rays.closest_facing(origin.as_vec3(), dir.as_vec3(), f32::INFINITY, skip) else {
+                        break;
+                    };
+                    let r = find(&mut parent, q);
+                    *parity.entry(r).or_default() ^= true;
+                    origin += dir * f64::from(hit.t).max(1e-9 * diag);
+                    skip = Some(q);
+                }
+                for (&r, &o) in &parity {
+                    if o {
+                        *odd.entry(r).or_default() += 1;
+                    }
                 }
             }
+            for (h, r) in holds.iter_mut().zip(shells.iter()) {
+                *h &= odd.get(r).copied().unwrap_or(0) >= 2;
+            }
         }
-        for (&r, &k) in &odd {
-            if k >= 2 && candidate[r as usize] {
+        for (h, &r) in holds.iter().zip(shells.iter()) {
+            if *h {
                 room_root[r as usize] = true;
             }
         }
