@@ -407,7 +407,8 @@ const ROOM_EMITTERS: usize = 4096;
 /// coverage test found the lamps, the walls and the floor inside it, with boxes on the
 /// floor opening the few points that saw them (−17 % created in such a room with one
 /// box). A shell that holds a light is a room, not a solid: its back copies are surfaces,
-/// and a probe that meets one is open. Only shells whose back copies a light sees first
+/// and a probe that meets one is open. Only closed shells (every edge shared by two input
+/// polygons) whose back copies a light sees first
 /// are candidates (a room wound inward shows its lamps its fronts, and keeps its back
 /// copies, which face the void, as they were); a solid seen from outside is crossed an
 /// even number of times, however it is wound, so furniture wound backwards stays a solid.
@@ -481,23 +482,37 @@ pub fn room_shells(scene: &Scene, rays: &SceneRays) -> Vec<bool> {
         x
     }
     type Key = ([u64; 3], [u64; 3]);
-    let mut first: HashMap<Key, u32> = HashMap::new();
+    // Per edge: the first polygon on it and how many input polygons share it.
+    let mut first: HashMap<Key, (u32, u32)> = HashMap::new();
     for (q, p) in scene.polygons.iter().enumerate() {
         let v = &p.vertices;
         for k in 0..v.len() {
             let (a, b) = (v[k].to_array().map(super::uniform::round_key), v[(k + 1) % v.len()].to_array().map(super::uniform::round_key));
             let key = if a <= b { (a, b) } else { (b, a) };
-            let other = *first.entry(key).or_insert(q as u32);
+            let e = first.entry(key).or_insert((q as u32, 0));
+            e.1 += u32::from(!p.back_side);
+            let other = e.0;
             let (ra, rb) = (find(&mut parent, q as u32), find(&mut parent, other));
             if ra != rb {
                 parent[ra as usize] = rb;
             }
         }
     }
+    // Closed shells only: one with an edge that a single input polygon has (a lone quad
+    // over a lamp, a trough open at the bottom) encloses nothing, whatever parity says.
+    let mut open_shell = vec![false; n];
+    for &(q, count) in first.values() {
+        if count < 2 {
+            let r = find(&mut parent, q);
+            open_shell[r as usize] = true;
+        }
+    }
     let mut candidates: HashMap<usize, Vec<u32>> = HashMap::new();
     for &(light, q) in &seen_back {
         let r = find(&mut parent, q);
-        candidates.entry(light).or_default().push(r);
+        if !open_shell[r as usize] {
+            candidates.entry(light).or_default().push(r);
+        }
     }
     // Crossings of each shell along three rays from every light (a two-sided pair is one
     // crossing: the first hit skips the polygon it leaves and its twin).
