@@ -166,8 +166,8 @@ pub fn enclosed(scene: &Scene, rays: &SceneRays, light: &Light, room: &[bool]) -
         }
         None => Ok(()),
     };
-    let sphere = |k: usize, n: usize| crate::sampling::fibonacci_sphere(k as u32, n as u32);
-    const PROBES: usize = 64;
+    let sphere = crate::sampling::fibonacci_sphere;
+    const PROBES: u32 = 64;
     (0..PROBES).all(|k| {
         let dir = sphere(k, PROBES);
         match from_behind(position, dir, None) {

@@ -373,9 +373,7 @@ impl Prepared {
             if progress.should_stop() {
                 return Err(Error::Cancelled);
             }
-            if let Some(shut) = shut_in_lights(scene, mesh, rays, &receivers) {
-                return Err(shut.error());
-            }
+            check_emitters_open(scene, mesh, rays, &receivers)?;
             let t_sky = Instant::now();
             self.external_irradiance = external_irradiance(scene, mesh, rays, &receivers, progress)?;
             let sky_seconds = t_sky.elapsed().as_secs_f64();
@@ -609,27 +607,26 @@ pub fn check_transport(solver: Solver, kind: transport::Kind) -> Result<()> {
     Ok(())
 }
 
-/// The lights of a scene whose only light is emitting polygons that the coverage test
-/// found wholly covered (inside closed geometry: every probe from them meets the back of a
-/// surface) and point or spot lights inside closed geometry; the run is refused
-/// ([`ShutIn::error`]). They light nothing, the solution is black, and the energy line and
+/// Refuses a scene whose only light is emitting polygons that the coverage test found
+/// wholly covered (inside closed geometry: every probe from them meets the back of a
+/// surface) and point or spot lights inside closed geometry. They light nothing, the solution is black, and the energy line and
 /// relative residuals divide by an emitted power of zero: a lamp in a closed room whose
 /// walls face outward, one-sided, wrote a black image with "emitted 0" and exit 0, and
 /// with `--two-sided` (before a closed two-sided shell holding a light was a room,
 /// [`crate::mesh::coverage::room_shells`]) every solver "diverged" with a residual of
 /// infinity naming the lamp, and `--solver direct` printed "absorbed inf %"; a point
 /// light alone in such a room gave "emitted 0", exit 0.
-fn shut_in_lights(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers) -> Option<ShutIn> {
+fn check_emitters_open(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers) -> Result<()> {
     if scene.lit_sky().is_some() {
-        return None;
+        return Ok(());
     }
     let (_, emission) = element_materials(scene, mesh);
     let emitting: Vec<usize> = (0..mesh.len()).filter(|&i| emission[i].max_element() > 0.0).collect();
     if (emitting.is_empty() && scene.lights.is_empty()) || emitting.iter().any(|&i| receivers.open_fraction[i] > 0.0) {
-        return None;
+        return Ok(());
     }
     if scene.lights.iter().any(|l| !crate::lights::enclosed(scene, rays, l, &receivers.room)) {
-        return None;
+        return Ok(());
     }
     let mut places: Vec<String> = Vec::new();
     let mut seen = std::collections::HashSet::new();
@@ -646,28 +643,13 @@ fn shut_in_lights(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Rece
         _ => "every emitting polygon and every light lie",
     };
     let more = if seen.len() + scene.lights.len() > 3 { ", …" } else { "" };
-    Some(ShutIn { what, places: format!("{}{more}", places.join(", ")) })
-}
-
-/// Lights that all lie inside closed geometry ([`shut_in_lights`]).
-struct ShutIn {
-    /// "every emitting polygon lies", "every light lies", …
-    what: &'static str,
-    /// The first few of them, `file:line` each.
-    places: String,
-}
-
-impl ShutIn {
-    /// The error that refuses the run.
-    fn error(&self) -> Error {
-        Error::Invalid(format!(
-            "{} inside closed geometry, so no light leaves it ({}): every probe ray from them meets the back of \
-             a surface first. Are the surfaces around them wound facing away from them (a room whose walls face \
-             outward reads as a solid box)? Reverse their winding so that they face the lights, or make them \
-             two-sided (--two-sided): a closed two-sided shell that holds a light is a room",
-            self.what, self.places
-        ))
-    }
+    Err(Error::Invalid(format!(
+        "{what} inside closed geometry, so no light leaves it ({}{more}): every probe ray from them meets the back of \
+         a surface first. Are the surfaces around them wound facing away from them (a room whose walls face \
+         outward reads as a solid box)? Reverse their winding so that they face the lights, or make them \
+         two-sided (--two-sided): a closed two-sided shell that holds a light is a room",
+        places.join(", ")
+    )))
 }
 
 /// A light named with where it was given: `file:line: light 'name'`.
@@ -679,7 +661,7 @@ fn light_place(l: &crate::scene::Light) -> String {
 /// A warning naming the emitting polygons (input sides; generated back copies aside) that
 /// the coverage test found wholly covered while others emit: inside closed geometry, they
 /// light nothing (a lamp inside a closed box whose faces point outward reads as inside a
-/// solid). [`shut_in_lights`] refuses the run when none is left.
+/// solid). [`check_emitters_open`] refuses the run when none is left.
 fn covered_emitters_warning(scene: &Scene, mesh: &Mesh, receivers: &Receivers) -> Option<String> {
     if receivers.open_fraction.is_empty() {
         return None;

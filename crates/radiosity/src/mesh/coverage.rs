@@ -452,11 +452,11 @@ pub fn room_shells(scene: &Scene, rays: &SceneRays) -> Vec<bool> {
     let mut seen_back: Vec<(usize, u32)> = Vec::new();
     for (light, (points, from, n)) in sources.iter().enumerate() {
         let (x, from, n) = (points[0], *from, *n);
+        let (t, b) = basis(n);
         for k in 0..ROOM_PROBES {
             let dir = if n == DVec3::ZERO {
                 crate::sampling::fibonacci_sphere(k, ROOM_PROBES)
             } else {
-                let (t, b) = basis(n);
                 let (u1, u2) = halton2(k, (0.5 / ROOM_PROBES as f64, 0.25));
                 let d = cosine_hemisphere(u1, u2);
                 t * d.x + b * d.y + n * d.z
@@ -481,15 +481,12 @@ pub fn room_shells(scene: &Scene, rays: &SceneRays) -> Vec<bool> {
         }
         x
     }
-    type Key = ([u64; 3], [u64; 3]);
     // Per edge: the first polygon on it and how many input polygons share it.
-    let mut first: HashMap<Key, (u32, u32)> = HashMap::new();
+    let mut first: HashMap<EdgeKey, (u32, u32)> = HashMap::new();
     for (q, p) in scene.polygons.iter().enumerate() {
         let v = &p.vertices;
         for k in 0..v.len() {
-            let (a, b) = (v[k].to_array().map(super::uniform::round_key), v[(k + 1) % v.len()].to_array().map(super::uniform::round_key));
-            let key = if a <= b { (a, b) } else { (b, a) };
-            let e = first.entry(key).or_insert((q as u32, 0));
+            let e = first.entry(edge_key(v[k], v[(k + 1) % v.len()])).or_insert((q as u32, 0));
             e.1 += u32::from(!p.back_side);
             let other = e.0;
             let (ra, rb) = (find(&mut parent, q as u32), find(&mut parent, other));
@@ -566,26 +563,30 @@ pub fn room_shells(scene: &Scene, rays: &SceneRays) -> Vec<bool> {
     (0..n as u32).map(|q| scene.polygons[q as usize].back_side && room_root[find(&mut parent, q) as usize]).collect()
 }
 
+/// An undirected edge between two vertices, equal for vertices equal up to rounding (and
+/// ±0), as the mesher's are.
+type EdgeKey = ([u64; 3], [u64; 3]);
+
+/// The [`EdgeKey`] of the edge `a`–`b` (either way round).
+fn edge_key(a: DVec3, b: DVec3) -> EdgeKey {
+    let (ka, kb) = (a.to_array().map(super::uniform::round_key), b.to_array().map(super::uniform::round_key));
+    if ka <= kb { (ka, kb) } else { (kb, ka) }
+}
+
 /// Per polygon: true for an emitter with an edge that no other input polygon shares (a
 /// lamp quad hung on its own, not a face of a closed solid). The back copy of such a
 /// polygon is a surface that emits, not the inside of a solid.
 fn lone_emitters(scene: &Scene) -> Vec<bool> {
     use std::collections::HashMap;
-    type Key = ([u64; 3], [u64; 3]);
-    // Vertices equal up to rounding (and ±0) share a key, as the mesher's do.
-    let key = |a: DVec3, b: DVec3| -> Key {
-        let (ka, kb) = (a.to_array().map(super::uniform::round_key), b.to_array().map(super::uniform::round_key));
-        if ka <= kb { (ka, kb) } else { (kb, ka) }
-    };
     let emits = |p: &crate::scene::Polygon| scene.materials[p.material as usize].is_emitter();
     if !scene.polygons.iter().any(|p| p.back_side && emits(p)) {
         return vec![false; scene.polygons.len()];
     }
-    let mut count: HashMap<Key, u32> = HashMap::new();
+    let mut count: HashMap<EdgeKey, u32> = HashMap::new();
     for p in scene.polygons.iter().filter(|p| !p.back_side) {
         let v = &p.vertices;
         for k in 0..v.len() {
-            *count.entry(key(v[k], v[(k + 1) % v.len()])).or_default() += 1;
+            *count.entry(edge_key(v[k], v[(k + 1) % v.len()])).or_default() += 1;
         }
     }
     scene
@@ -593,7 +594,7 @@ fn lone_emitters(scene: &Scene) -> Vec<bool> {
         .iter()
         .map(|p| {
             let v = &p.vertices;
-            emits(p) && (0..v.len()).any(|k| count.get(&key(v[k], v[(k + 1) % v.len()])).is_none_or(|&c| c <= 1))
+            emits(p) && (0..v.len()).any(|k| count.get(&edge_key(v[k], v[(k + 1) % v.len()])).is_none_or(|&c| c <= 1))
         })
         .collect()
 }
