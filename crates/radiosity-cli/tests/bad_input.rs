@@ -646,9 +646,12 @@ fn camera_flags_at_extreme_or_degenerate_values_are_refused() {
     assert!(err.contains("finite"), "{err}");
 }
 
-/// A glowing unit floor under a wide two-sided blocker with a wide ceiling above it.
-/// Analytic factors see the ceiling through the blocker, so the floor's light is received
-/// twice: the books close only with a negative escaped term (about −7 % here).
+/// A glowing unit floor (one-sided, facing up) under a wide two-sided blocker with a wide
+/// two-sided ceiling above it (`b.toml`). Analytic factors see the ceiling through the
+/// blocker, so the floor's light is received twice: the books close only with a negative
+/// escaped term (−14.6 % here). Before light told the sides of two-sided polygons apart
+/// (`mesh::lit_sides`), the floor, seeing only the blocker's back copy, read as inside a
+/// solid: this scene was refused, and with the floor two-sided its upper side was lost.
 fn floor_blocker_ceiling(d: &Path) -> PathBuf {
     std::fs::write(d.join("b.mtl"), "newmtl lamp\nKd 0.5 0.5 0.5\nKe 1 1 1\nnewmtl grey\nKd 0.8 0.8 0.8\n").unwrap();
     let obj = "mtllib b.mtl\n\
@@ -656,8 +659,9 @@ fn floor_blocker_ceiling(d: &Path) -> PathBuf {
         v -4.5 -4.5 1\nv 5.5 -4.5 1\nv 5.5 5.5 1\nv -4.5 5.5 1\n\
         v -4.5 -4.5 0.5\nv 5.5 -4.5 0.5\nv 5.5 5.5 0.5\nv -4.5 5.5 0.5\n\
         usemtl lamp\nf 1 2 3 4\nusemtl grey\nf 5 8 7 6\nf 9 10 11 12\n";
-    let p = d.join("b.obj");
-    std::fs::write(&p, obj).unwrap();
+    std::fs::write(d.join("b.obj"), obj).unwrap();
+    let p = d.join("b.toml");
+    std::fs::write(&p, "mesh = \"b.obj\"\ntwo_sided = true\n[materials.lamp]\ntwo_sided = false\n").unwrap();
     p
 }
 
@@ -665,7 +669,7 @@ fn floor_blocker_ceiling(d: &Path) -> PathBuf {
 fn created_light_is_warned_even_under_quiet() {
     let d = case_dir("created");
     floor_blocker_ceiling(&d);
-    let base = ["solve", "b.obj", "--two-sided", "--mesh-size", "0.5", "-q", "--report", "r.json"];
+    let base = ["solve", "b.toml", "--mesh-size", "0.5", "-q", "--report", "r.json"];
     let (code, err, _) = run_in(&d, &[&base[..], &["--form-factors", "analytic"]].concat());
     assert_eq!(code, Some(0), "{err}");
     // The energy line's own escaped term is below −1 % of the emitted power.

@@ -146,10 +146,9 @@ pub fn element_irradiance(
 /// enclosed (the floor under a box without a bottom: every probe from there meets the box's
 /// back faces, as the coverage test of [`crate::mesh::Receivers`] decides), so its light
 /// reaches no open surface (a lamp placed inside a block by mistake). Never for a
-/// directional light. `room`: per polygon, the back copies of shells that lights see from
-/// inside ([`crate::mesh::coverage::room_shells`], [`crate::mesh::Receivers::room`]), which
-/// are surfaces, not the inside of a solid (empty: none).
-pub fn enclosed(scene: &Scene, rays: &SceneRays, light: &Light, room: &[bool]) -> bool {
+/// directional light. `sides`: per polygon, what each side of a two-sided pair is, as light
+/// showed it ([`crate::mesh::Receivers::sides`]; empty: the input winding).
+pub fn enclosed(scene: &Scene, rays: &SceneRays, light: &Light, sides: &[crate::mesh::lit_sides::Side]) -> bool {
     let (LightKind::Point { position } | LightKind::Spot { position, .. }) = light.kind else {
         return false;
     };
@@ -161,8 +160,7 @@ pub fn enclosed(scene: &Scene, rays: &SceneRays, light: &Light, room: &[bool]) -
     ) {
         Some((hit, q)) => {
             let p = &scene.polygons[q as usize];
-            let room = room.get(q as usize).copied().unwrap_or(false);
-            Err(((p.back_side && !room) || p.normal.dot(dir) > 0.0, hit.t as f64, q))
+            Err((crate::mesh::coverage::solid_side(scene, sides, q) || p.normal.dot(dir) > 0.0, hit.t as f64, q))
         }
         None => Ok(()),
     };

@@ -535,7 +535,7 @@ impl Prepared {
         form_factor::push_warning(crate::back_faces::created_warning(&solution.energy, cause), progress, &mut warnings);
         form_factor::push_warning(crate::back_faces::two_sided_emitter_warning(&self.scene, &solution.energy), progress, &mut warnings);
         form_factor::push_warning(covered_emitters_warning(&self.scene, &self.mesh, &self.receivers), progress, &mut warnings);
-        for l in self.scene.lights.iter().filter(|l| crate::lights::enclosed(&self.scene, &self.rays, l, &self.receivers.room)) {
+        for l in self.scene.lights.iter().filter(|l| crate::lights::enclosed(&self.scene, &self.rays, l, &self.receivers.sides)) {
             let w = format!(
                 "{} is inside closed geometry (every ray from it meets the back of a surface): its light reaches no surface",
                 light_place(l)
@@ -612,8 +612,8 @@ pub fn check_transport(solver: Solver, kind: transport::Kind) -> Result<()> {
 /// surface) and point or spot lights inside closed geometry. They light nothing, the solution is black, and the energy line and
 /// relative residuals divide by an emitted power of zero: a lamp in a closed room whose
 /// walls face outward, one-sided, wrote a black image with "emitted 0" and exit 0, and
-/// with `--two-sided` (before a closed two-sided shell holding a light was a room,
-/// [`crate::mesh::coverage::room_shells`]) every solver "diverged" with a residual of
+/// with `--two-sided` (before light told the sides of two-sided polygons apart,
+/// [`crate::mesh::lit_sides`]) every solver "diverged" with a residual of
 /// infinity naming the lamp, and `--solver direct` printed "absorbed inf %"; a point
 /// light alone in such a room gave "emitted 0", exit 0.
 fn check_emitters_open(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: &Receivers) -> Result<()> {
@@ -625,7 +625,7 @@ fn check_emitters_open(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: 
     if (emitting.is_empty() && scene.lights.is_empty()) || emitting.iter().any(|&i| receivers.open_fraction[i] > 0.0) {
         return Ok(());
     }
-    if scene.lights.iter().any(|l| !crate::lights::enclosed(scene, rays, l, &receivers.room)) {
+    if scene.lights.iter().any(|l| !crate::lights::enclosed(scene, rays, l, &receivers.sides)) {
         return Ok(());
     }
     let mut places: Vec<String> = Vec::new();
@@ -647,7 +647,7 @@ fn check_emitters_open(scene: &Scene, mesh: &Mesh, rays: &SceneRays, receivers: 
         "{what} inside closed geometry, so no light leaves it ({}{more}): every probe ray from them meets the back of \
          a surface first. Are the surfaces around them wound facing away from them (a room whose walls face \
          outward reads as a solid box)? Reverse their winding so that they face the lights, or make them \
-         two-sided (--two-sided): a closed two-sided shell that holds a light is a room",
+         two-sided (--two-sided): then light tells which side of each surface faces it",
         places.join(", ")
     )))
 }

@@ -493,8 +493,8 @@ fn scene_without_light_is_an_error_saying_what_was_skipped() {
 /// 0 one-sided; two-sided, every solver "diverged" with a residual of infinity naming the
 /// lamp and `--solver direct` printed "absorbed inf %" with exit 0. Now one-sided it is a
 /// clear error that names the lamp and the winding; two-sided (every surface both ways,
-/// what a model wound backwards asks for) a closed shell that holds a light is a room
-/// (`room_shells`), and the room solves as the one wound inward does: closed, the same
+/// what a model wound backwards asks for) light reaches the walls only from behind, their
+/// sides swap roles (`mesh::lit_sides`), and the room solves as the one wound inward does: closed, the same
 /// light on its walls — also with a box wound outward on its floor, which stays a solid
 /// (dark inside; with the room read as a solid, the few points of lamp and walls that saw
 /// the box were open and the solve created 17 % of the light, exit 0).
@@ -594,10 +594,7 @@ fn lamp_inside_a_room_wound_outward_is_an_error_one_sided_and_a_room_two_sided()
     let mut seen = Vec::new();
     for (name, flip) in [("boxin.obj", true), ("boxout.obj", false)] {
         let text = format!("mtllib outroom.mtl\n{corners}{block}g room\nusemtl grey\n{}g box\n{block_faces}g lamp\nusemtl lamp\nf 9 10 11 12\n", faces(flip));
-        let mut d = scene::load(write(name, &text).to_str().unwrap()).unwrap();
-        d.two_sided = true;
-        let sc = Scene::from_desc(d).unwrap();
-        let s = solve_scene(sc, &Settings { mesh_size: Some(0.05), ..Default::default() }, &radiosity::NoProgress).unwrap();
+        let s = solve_two_sided(name, &text, 0.05);
         let e = s.energy();
         assert!(e.escaped[1].abs() < 0.01 * e.emitted[1], "{name}: {e:?}");
         let objects = s.objects();
@@ -612,6 +609,93 @@ fn lamp_inside_a_room_wound_outward_is_an_error_one_sided_and_a_room_two_sided()
     let (a, b) = (seen[0], seen[1]);
     // Measured 2026-12-07: room 1.0138 / 1.0142, box 0.5707 / 0.5709.
     assert!((a.0 / b.0 - 1.0).abs() < 0.01 && (a.1 / b.1 - 1.0).abs() < 0.01, "wound inward {a:?}, outward {b:?}");
+}
+
+/// The OBJ `text`, written as `name` and read with every surface two-sided, solved at
+/// `mesh_size` with the default settings otherwise.
+fn solve_two_sided(name: &str, text: &str, mesh_size: f64) -> radiosity::pipeline::Solved {
+    use radiosity::pipeline::{solve_scene, Settings};
+    let mut d = scene::load(write(name, text).to_str().unwrap()).unwrap();
+    d.two_sided = true;
+    let sc = Scene::from_desc(d).unwrap();
+    solve_scene(sc, &Settings { mesh_size: Some(mesh_size), ..Default::default() }, &radiosity::NoProgress).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+/// A model with every face reversed (what a mirroring export or a negative scale gives),
+/// `--two-sided`: the same light as the model as drawn. The room is not closed edge to edge
+/// (its floor is two quads under whole walls), its lamp hangs in a trough open at the
+/// bottom (as RenderPark office2's luminaires), a box stands on the floor and a panel floats
+/// in the air. Read by the input winding, reversed, the room was a solid: half the lamp
+/// was covered (emitted 14.1 of 25.1) and 14 % of the light "escaped" a closed room, exit
+/// 0; office2 reversed lost 84 % of its lamp. Light now tells the sides apart
+/// (`mesh::lit_sides`).
+#[test]
+fn a_model_with_every_face_reversed_gives_the_same_light_two_sided() {
+    write("rev.mtl", "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl lamp\nKd 0 0 0\nKe 100 100 100\n");
+    type Q = [[f64; 3]; 4];
+    let mut quads: Vec<(&str, &str, Q)> = vec![
+        ("room", "grey", [[0., 0., 0.], [0.5, 0., 0.], [0.5, 1., 0.], [0., 1., 0.]]),
+        ("room", "grey", [[0.5, 0., 0.], [1., 0., 0.], [1., 1., 0.], [0.5, 1., 0.]]),
+    ];
+    let cube = |lo: [f64; 3], hi: [f64; 3]| -> Vec<Q> {
+        let c = |i: usize| [if i & 1 == 0 { lo[0] } else { hi[0] }, if i & 2 == 0 { lo[1] } else { hi[1] }, if i & 4 == 0 { lo[2] } else { hi[2] }];
+        // Outward faces of the box with corners numbered by bits (x, y, z).
+        [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]].iter().map(|f| f.map(c)).collect()
+    };
+    // The room's ceiling and walls, facing in (the outward faces of the unit box, reversed).
+    for mut f in cube([0.; 3], [1.; 3]).into_iter().skip(1) {
+        f.reverse();
+        quads.push(("room", "grey", f));
+    }
+    // A trough open at the bottom (faces of a box without its floor) and the lamp inside.
+    for f in cube([0.35, 0.35, 0.9], [0.65, 0.65, 0.98]).into_iter().skip(1) {
+        quads.push(("trough", "grey", f));
+    }
+    quads.push(("lamp", "lamp", [[0.4, 0.4, 0.96], [0.4, 0.6, 0.96], [0.6, 0.6, 0.96], [0.6, 0.4, 0.96]]));
+    for f in cube([0.15, 0.15, 0.0], [0.45, 0.45, 0.3]) {
+        quads.push(("box", "grey", f));
+    }
+    quads.push(("panel", "grey", [[0.6, 0.2, 0.5], [0.9, 0.2, 0.5], [0.9, 0.5, 0.5], [0.6, 0.5, 0.5]]));
+    let mut solved = Vec::new();
+    for (name, reversed) in [("drawn.obj", false), ("reversed.obj", true)] {
+        let mut text = String::from("mtllib rev.mtl\n");
+        for (_, _, q) in &quads {
+            for v in q {
+                text += &format!("v {} {} {}\n", v[0], v[1], v[2]);
+            }
+        }
+        for (k, (g, m, _)) in quads.iter().enumerate() {
+            let mut f: Vec<usize> = (4 * k + 1..4 * k + 5).collect();
+            if reversed {
+                f.reverse();
+            }
+            text += &format!("g {g}\nusemtl {m}\nf {} {} {} {}\n", f[0], f[1], f[2], f[3]);
+        }
+        let s = solve_two_sided(name, &text, 0.05);
+        let e = s.energy();
+        // A closed room: the furnace rooms' 1 %.
+        assert!(e.escaped[1].abs() < 0.01 * e.emitted[1], "{name}: {e:?}");
+        solved.push((e.emitted[1], s.objects()));
+    }
+    let ((e0, drawn), (e1, reversed)) = (&solved[0], &solved[1]);
+    assert!((e1 / e0 - 1.0).abs() < 1e-9, "emitted: drawn {e0}, reversed {e1}");
+    // Each object's sides, matched: the drawn front is the reversed back.
+    let mut worst = (0.0, String::new());
+    for (a, b) in drawn.iter().zip(reversed.iter()) {
+        assert_eq!(a.name, b.name);
+        let (af, ab) = (a.radiance_rgb[1], a.back_radiance_rgb.unwrap()[1]);
+        let (bf, bb) = (b.radiance_rgb[1], b.back_radiance_rgb.unwrap()[1]);
+        // Relative to the object's lit side (a dim side in a 2 cm gap reads 0.031 / 0.034).
+        let lit = af.max(ab).max(bf).max(bb);
+        for (x, y) in [(af, bb), (ab, bf)] {
+            let d = (x - y).abs() / lit;
+            if d > worst.0 {
+                worst = (d, format!("{} {x} vs {y}", a.name));
+            }
+        }
+    }
+    eprintln!("worst object side: {:.3} % ({})", 100.0 * worst.0, worst.1);
+    assert!(worst.0 < 0.01, "worst object side: {:.2} % ({})", 100.0 * worst.0, worst.1);
 }
 
 #[test]

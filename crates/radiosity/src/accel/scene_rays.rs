@@ -101,6 +101,13 @@ impl SceneRays {
         &self.bvh
     }
 
+    /// The other side of polygon `p`'s two-sided pair, if it has one.
+    #[inline]
+    pub fn twin_of(&self, p: u32) -> Option<u32> {
+        let t = self.twin[p as usize];
+        (t != NO_TWIN).then_some(t)
+    }
+
     /// The polygon a triangle belongs to (the front of a two-sided pair; see
     /// [`SceneRays::polygon_hit`]).
     #[inline]

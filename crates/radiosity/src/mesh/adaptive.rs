@@ -704,6 +704,8 @@ pub fn refine_a_priori(
     }
     let mut cache: HashMap<u32, f64> = HashMap::new();
     let mut scale = None;
+    // Which side of each two-sided pair is air depends on the scene alone: found once.
+    let sides = opts.contact.then(|| Receivers::sides(scene, rays));
     for _ in 0..opts.max_depth {
         if progress.should_stop() {
             break;
@@ -722,7 +724,7 @@ pub fn refine_a_priori(
         });
         // The scale is the mean over the whole first (uniform) mesh, kept for later rounds.
         let sc = *scale.get_or_insert_with(|| samples.as_ref().map_or(1.0, |s| mean_exitance(scene, &sub, |i| s[i].centre)));
-        let receivers = opts.contact.then(|| Receivers::compute(scene, &sub, rays));
+        let receivers = sides.as_ref().map(|sd| Receivers::compute_given(scene, &sub, rays, sd.clone(), &crate::NoProgress));
         nrays += receivers.as_ref().map_or(0, |r| r.rays);
         for (k, e) in errors_from(samples.as_deref(), receivers.as_ref(), sub.len(), sc).into_iter().enumerate() {
             cache.insert(ids[new[k]], e);

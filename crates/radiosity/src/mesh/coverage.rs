@@ -12,7 +12,10 @@
 //! the input winding's front; where a probe meets the back copy of a lone emitter, one
 //! with an edge no other polygon shares, the point is covered only if the copy is covered
 //! there too, tested at the first such hit: a lamp's emitting back is a surface, not the
-//! inside of a solid). Form factors are gathered at open points only, so the
+//! inside of a solid; where light reaches a two-sided polygon only from behind, as on
+//! every wall of a room wound outward, its sides swap roles, and where it reaches both
+//! sides, as on a trough open at the bottom, neither is inside: [`super::lit_sides`]). Form
+//! factors are gathered at open points only, so the
 //! element's value is the radiosity of its open part; per-object averages weight each
 //! element by its open fraction (covered area counts as zero, as in the path-traced
 //! references), and the power formulation uses open areas.
@@ -23,6 +26,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
+use super::lit_sides::Side;
 use super::Mesh;
 use crate::accel::SceneRays;
 use crate::sampling::{basis, cosine_hemisphere, halton2};
@@ -57,9 +61,9 @@ pub struct Receivers {
     pub open_cells: Vec<u64>,
     /// Probe rays cast.
     pub rays: u64,
-    /// Per polygon: true for the back copies of a shell that a light sees from inside (a
-    /// room, not a solid: see [`room_shells`]); empty when there is none.
-    pub room: Vec<bool>,
+    /// Per polygon: what a probe meets on each side of a two-sided pair, as light showed it
+    /// ([`super::lit_sides`]); empty: the input winding throughout.
+    pub sides: Vec<Side>,
 }
 
 impl Receivers {
@@ -89,7 +93,7 @@ impl Receivers {
                 lv
             })
             .collect();
-        Receivers { points, open_fraction: vec![1.0; mesh.len()], open_cells: vec![u64::MAX; mesh.len()], rays: 0, room: Vec::new() }
+        Receivers { points, open_fraction: vec![1.0; mesh.len()], open_cells: vec![u64::MAX; mesh.len()], rays: 0, sides: Vec::new() }
     }
 
     /// True if the point of element `e` at (u, v) lies in an open cell.
@@ -147,8 +151,22 @@ impl Receivers {
     /// [`Receivers::compute`] reporting progress (stage "coverage"; the elements left are
     /// skipped once `progress` asks to stop, and the caller is expected to check it).
     pub fn compute_with(scene: &Scene, mesh: &Mesh, rays: &SceneRays, progress: &dyn crate::Progress) -> Receivers {
+        Self::compute_given(scene, mesh, rays, Self::sides(scene, rays), progress)
+    }
+
+    /// What a probe meets on each side of the scene's two-sided pairs, as light shows it
+    /// ([`super::lit_sides::sides`], started at points that the input winding's coverage test
+    /// finds open): [`Receivers::sides`], for [`Receivers::compute_given`].
+    pub fn sides(scene: &Scene, rays: &SceneRays) -> Vec<Side> {
         let diag = scene.diagonal().max(f64::MIN_POSITIVE);
-        let probe = Probe { scene, rays, diag, lone_emitter: lone_emitters(scene), room: room_shells(scene, rays) };
+        let probe = Probe { scene, rays, diag, lone_emitter: lone_emitters(scene), sides: Vec::new() };
+        super::lit_sides::sides(scene, rays, &|p, n, q| !covered(p, n, q, &probe, &mut 0))
+    }
+
+    /// [`Receivers::compute_with`] with the `sides` of [`Receivers::sides`] already found.
+    pub fn compute_given(scene: &Scene, mesh: &Mesh, rays: &SceneRays, sides: Vec<Side>, progress: &dyn crate::Progress) -> Receivers {
+        let diag = scene.diagonal().max(f64::MIN_POSITIVE);
+        let probe = Probe { scene, rays, diag, lone_emitter: lone_emitters(scene), sides };
         progress.begin("coverage", mesh.len() as u64);
         let done = std::sync::atomic::AtomicU64::new(0);
         let res: Vec<([Vec<DVec3>; MAX_K], f64, u64, u64)> = mesh
@@ -300,7 +318,7 @@ impl Receivers {
             open_fraction.push(f);
             open_cells.push(c);
         }
-        Receivers { points, open_fraction, open_cells, rays, room: probe.room }
+        Receivers { points, open_fraction, open_cells, rays, sides: probe.sides }
     }
 }
 
@@ -384,191 +402,29 @@ struct Probe<'a> {
     rays: &'a SceneRays,
     diag: f64,
     lone_emitter: Vec<bool>,
-    /// Per polygon: true for the generated back copies of a shell that a light sees from
-    /// inside ([`room_shells`]; empty: none).
-    room: Vec<bool>,
+    /// [`Receivers::sides`].
+    sides: Vec<Side>,
 }
 
-/// Probe rays per light in [`room_shells`] that look for a back copy seen first.
-const ROOM_PROBES: u32 = 16;
-
-/// Most emitting polygons whose points [`room_shells`] probes from (evenly spread over
-/// them beyond this).
-const ROOM_EMITTERS: usize = 4096;
-
-/// Per polygon: true for the generated back copies of two-sided polygons in a shell (input
-/// polygons connected through shared edges) that holds a light: the light sees one of its
-/// back copies first, and rays from every one of the light's points (an emitting
-/// polygon's centroid and corners, pulled in) cross it an odd number of times (in two of
-/// three directions each). With every surface
-/// two-sided, "inside a closed shell" reads as inside a solid only by the input winding: a
-/// room wound outward (a model with most polygons wound backwards, which is what
-/// `--two-sided` is for) is a closed shell whose back copies face the lamps, and the
-/// coverage test found the lamps, the walls and the floor inside it, with boxes on the
-/// floor opening the few points that saw them (−17 % created in such a room with one
-/// box). A shell that holds a light is a room, not a solid: its back copies are surfaces,
-/// and a probe that meets one is open. Only closed shells (every edge shared by two input
-/// polygons) whose back copies a light sees first
-/// are candidates (a room wound inward shows its lamps its fronts, and keeps its back
-/// copies, which face the void, as they were); a solid seen from outside is crossed an
-/// even number of times, however it is wound, so furniture wound backwards stays a solid.
-pub fn room_shells(scene: &Scene, rays: &SceneRays) -> Vec<bool> {
-    use std::collections::HashMap;
-    let n = scene.polygons.len();
-    if !scene.polygons.iter().any(|p| p.back_side) || scene.lit_sky().is_some() {
-        return Vec::new();
+/// True when a probe that meets polygon `q` (the side facing it) meets the inside of a
+/// solid: the generated back copy of a two-sided polygon (behind its input winding's
+/// front), unless light showed the pair's sides otherwise (`sides`, from
+/// [`super::lit_sides::sides`]). (The back of a one-sided surface is told by the probe's
+/// direction.)
+pub fn solid_side(scene: &Scene, sides: &[Side], q: u32) -> bool {
+    match sides.get(q as usize) {
+        Some(Side::Air) => false,
+        Some(Side::Solid) => true,
+        _ => scene.polygons[q as usize].back_side,
     }
-    let diag = scene.diagonal().max(f64::MIN_POSITIVE);
-    // The lights' points: each emitting input polygon's centroid (just off its front; not
-    // the back copies, which inside a box that emits all over, as in a furnace, would make
-    // the box a room) and each point or spot light, with the polygon they start on.
-    let emitting: Vec<u32> = (0..n as u32)
-        .filter(|&q| {
-            let p = &scene.polygons[q as usize];
-            !p.back_side && scene.materials[p.material as usize].is_emitter()
-        })
-        .collect();
-    let step = emitting.len().div_ceil(ROOM_EMITTERS).max(1);
-    // Each light: where it starts (an emitting polygon's centroid and its corners pulled a
-    // tenth of the way in, just off its front; a point light's position), the polygon it
-    // starts on, and its normal (zero: all round).
-    let mut sources: Vec<(Vec<DVec3>, Option<u32>, DVec3)> = emitting
-        .iter()
-        .step_by(step)
-        .map(|&q| {
-            let p = &scene.polygons[q as usize];
-            let (c, off) = (p.centroid(), p.normal * (1e-7 * diag));
-            let points = std::iter::once(c).chain(p.vertices.iter().map(|&v| v + 0.1 * (c - v))).map(|x| x + off).collect();
-            (points, Some(q), p.normal)
-        })
-        .collect();
-    for l in &scene.lights {
-        if let crate::scene::LightKind::Point { position } | crate::scene::LightKind::Spot { position, .. } = l.kind {
-            sources.push((vec![position], None, DVec3::ZERO));
-        }
-    }
-    // The back copies each light sees first (cosine probes about an emitter's normal from
-    // its centroid, a sphere about a point light): only their shells can be its room.
-    let mut seen_back: Vec<(usize, u32)> = Vec::new();
-    for (light, (points, from, n)) in sources.iter().enumerate() {
-        let (x, from, n) = (points[0], *from, *n);
-        let (t, b) = basis(n);
-        for k in 0..ROOM_PROBES {
-            let dir = if n == DVec3::ZERO {
-                crate::sampling::fibonacci_sphere(k, ROOM_PROBES)
-            } else {
-                let (u1, u2) = halton2(k, (0.5 / ROOM_PROBES as f64, 0.25));
-                let d = cosine_hemisphere(u1, u2);
-                t * d.x + b * d.y + n * d.z
-            };
-            if let Some((_, q)) = rays.closest_facing(x.as_vec3(), dir.as_vec3(), f32::INFINITY, from) {
-                if scene.polygons[q as usize].back_side {
-                    seen_back.push((light, q));
-                }
-            }
-        }
-    }
-    if seen_back.is_empty() {
-        return Vec::new();
-    }
-    // Shells: polygons joined through shared edges (union–find; a back copy shares every
-    // edge with its front).
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    fn find(parent: &mut [u32], mut x: u32) -> u32 {
-        while parent[x as usize] != x {
-            parent[x as usize] = parent[parent[x as usize] as usize];
-            x = parent[x as usize];
-        }
-        x
-    }
-    // Per edge: the first polygon on it and how many input polygons share it.
-    let mut first: HashMap<EdgeKey, (u32, u32)> = HashMap::new();
-    for (q, p) in scene.polygons.iter().enumerate() {
-        let v = &p.vertices;
-        for k in 0..v.len() {
-            let e = first.entry(edge_key(v[k], v[(k + 1) % v.len()])).or_insert((q as u32, 0));
-            e.1 += u32::from(!p.back_side);
-            let other = e.0;
-            let (ra, rb) = (find(&mut parent, q as u32), find(&mut parent, other));
-            if ra != rb {
-                parent[ra as usize] = rb;
-            }
-        }
-    }
-    // Closed shells only: one with an edge that a single input polygon has (a lone quad
-    // over a lamp, a trough open at the bottom) encloses nothing, whatever parity says.
-    let mut open_shell = vec![false; n];
-    for &(q, count) in first.values() {
-        if count < 2 {
-            let r = find(&mut parent, q);
-            open_shell[r as usize] = true;
-        }
-    }
-    let mut candidates: HashMap<usize, Vec<u32>> = HashMap::new();
-    for &(light, q) in &seen_back {
-        let r = find(&mut parent, q);
-        if !open_shell[r as usize] {
-            candidates.entry(light).or_default().push(r);
-        }
-    }
-    // Crossings of each shell along three rays from every light (a two-sided pair is one
-    // crossing: the first hit skips the polygon it leaves and its twin).
-    const DIRS: [[f64; 3]; 3] = [[0.3107, 0.8713, 0.3797], [-0.7218, 0.1232, 0.6811], [0.4513, -0.5391, -0.7110]];
-    const MOST_HITS: usize = 4096;
-    let mut room_root = vec![false; n];
-    let mut odd: HashMap<u32, u32> = HashMap::new();
-    let mut parity: HashMap<u32, bool> = HashMap::new();
-    for (light, shells) in &mut candidates {
-        shells.sort_unstable();
-        shells.dedup();
-        // A candidate holds the light when every one of its points lies inside it: an
-        // emitting face that runs into another box (interpenetrating boxes in a furnace,
-        // every face emitting) has points on both sides, and that box stays a solid.
-        let (points, from, _) = &sources[*light];
-        let mut holds = vec![true; shells.len()];
-        for &x in points {
-            odd.clear();
-            for d in DIRS {
-                let dir = DVec3::from_array(d).normalize();
-                parity.clear();
-                let (mut origin, mut skip) = (x, *from);
-                for _ in 0..MOST_HITS {
-                    let Some((hit, q)) = rays.closest_facing(origin.as_vec3(), dir.as_vec3(), f32::INFINITY, skip) else {
-                        break;
-                    };
-                    let r = find(&mut parent, q);
-                    *parity.entry(r).or_default() ^= true;
-                    origin += dir * f64::from(hit.t).max(1e-9 * diag);
-                    skip = Some(q);
-                }
-                for (&r, &o) in &parity {
-                    if o {
-                        *odd.entry(r).or_default() += 1;
-                    }
-                }
-            }
-            for (h, r) in holds.iter_mut().zip(shells.iter()) {
-                *h &= odd.get(r).copied().unwrap_or(0) >= 2;
-            }
-        }
-        for (h, &r) in holds.iter().zip(shells.iter()) {
-            if *h {
-                room_root[r as usize] = true;
-            }
-        }
-    }
-    if !room_root.contains(&true) {
-        return Vec::new();
-    }
-    (0..n as u32).map(|q| scene.polygons[q as usize].back_side && room_root[find(&mut parent, q) as usize]).collect()
 }
 
 /// An undirected edge between two vertices, equal for vertices equal up to rounding (and
 /// ±0), as the mesher's are.
-type EdgeKey = ([u64; 3], [u64; 3]);
+pub(super) type EdgeKey = ([u64; 3], [u64; 3]);
 
 /// The [`EdgeKey`] of the edge `a`–`b` (either way round).
-fn edge_key(a: DVec3, b: DVec3) -> EdgeKey {
+pub(super) fn edge_key(a: DVec3, b: DVec3) -> EdgeKey {
     let (ka, kb) = (a.to_array().map(super::uniform::round_key), b.to_array().map(super::uniform::round_key));
     if ka <= kb { (ka, kb) } else { (kb, ka) }
 }
@@ -619,9 +475,7 @@ fn covered_at(p: DVec3, n: DVec3, patch: u32, probe: &Probe, cast: &mut u64, nes
         // copy of a two-sided one (behind its input winding's front): inside a two-sided box
         // counts as inside, as for a one-sided one.
         match probe.rays.closest_facing(origin, dir.as_vec3(), f32::INFINITY, Some(patch)) {
-            // The inside of a shell that holds a light: a room's surface, open.
-            Some((_, q)) if probe.room.get(q as usize).copied().unwrap_or(false) => return false,
-            Some((hit, q)) if scene.polygons[q as usize].back_side => {
+            Some((hit, q)) if solid_side(scene, &probe.sides, q) => {
                 // The back copy of a lone emitter (a lamp quad on its own, not a face of
                 // a closed solid) emits: the point is inside a solid only if that side is
                 // too where the probe meets it. A two-sided lamp 0.01 under a ceiling

@@ -10,6 +10,7 @@
 //! The target element size is in scene units; [`default_size`] scales with the scene.
 
 pub mod coverage;
+pub mod lit_sides;
 pub mod locate;
 pub mod adaptive;
 pub mod atlas;
