@@ -1298,7 +1298,7 @@ fn energy_books_against_shooting() {
 }
 
 /// Diagnostic (ignored): the links of a few elements of one polygon (env `LINE`, its OBJ
-/// line; default the conference ceiling; `MODEL` as in `operator_against_ray_gather`; `PICKS` elements, `RAYS` rays each; `WHY=1`
+/// line; default the conference ceiling; `MODEL` as in `operator_against_ray_gather`, or an absolute path; `MESH_SIZE`; `PICKS` elements, `RAYS` rays each; `WHY=1`
 /// prints where the tree stops linking the largest unlinked hits) against Monte Carlo
 /// gathering of the same solution:
 /// per link source, `f · B̃_S` against the mean of `B` over cosine-weighted rays that land
@@ -1321,6 +1321,7 @@ fn link_truth() {
     let env_f = |k: &str| std::env::var(k).ok().and_then(|x| x.parse::<f64>().ok());
     settings.links.min_size = env_f("MIN_SIZE");
     settings.links.closure_rays = env_f("CLOSURE").map(|c| c as usize);
+    settings.mesh_size = env_f("MESH_SIZE");
     let sol = solve_scene(scene, &settings, &NoProgress).unwrap();
     let h = sol.transport.as_ref().unwrap().hierarchy().unwrap();
     let tree = &h.tree;
