@@ -1115,6 +1115,16 @@ impl Ctx<'_> {
                 if b <= tol {
                     continue; // R behind S
                 }
+                // Back to back in one plane: the two sides of a two-sided polygon. The box
+                // tests above miss them when the plane is tilted (a box's corners lie off
+                // it), and a point of R then read its own back copy as a whole hemisphere
+                // (`point_to_polygon` on a polygon around the point, in its tangent plane):
+                // McGuire's Cornell box `--two-sided`, whose left wall is a warped quad
+                // split in two, had rows of 1.3–1.6 that the guard halved, the wall 10 %
+                // dark. Point-sampled rows skip such pairs likewise (`facing_patches`).
+                if ns.normal().dot(n_r) < -1.0 + 1e-6 && n_r.dot(ns.centroid.as_dvec3() - pr).abs() <= tol {
+                    continue;
+                }
             }
             // A source straddling R's plane is opened (the part behind R sends nothing),
             // down to the minimum size: below it the point-by-point integral of a terminal
