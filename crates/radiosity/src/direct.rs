@@ -62,15 +62,9 @@ pub fn emitters(scene: &Scene) -> Vec<Emitter> {
                 return None;
             }
             let v = &p.vertices;
-            let mut cdf = Vec::with_capacity(v.len() - 2);
-            let mut acc = 0.0;
-            let mut moment = DVec3::ZERO;
-            for k in 1..v.len() - 1 {
-                let a = 0.5 * (v[k] - v[0]).cross(v[k + 1] - v[0]).length();
-                acc += a;
-                moment += a * (v[0] + v[k] + v[k + 1]) / 3.0;
-                cdf.push(acc);
-            }
+            let cdf = fan_cdf(v);
+            let acc = *cdf.last().unwrap();
+            let moment: DVec3 = (1..v.len() - 1).map(|k| 0.5 * (v[k] - v[0]).cross(v[k + 1] - v[0]).length() * (v[0] + v[k] + v[k + 1]) / 3.0).sum();
             let centroid = if acc > 0.0 { moment / acc } else { v[0] };
             let radius = v.iter().map(|p| (*p - centroid).length()).fold(0.0, f64::max);
             Some(Emitter {
@@ -110,7 +104,20 @@ fn guide(em: &Emitter, x: DVec3, n: DVec3) -> f64 {
     (hx * cy * em.area / (std::f64::consts::PI * r2 * r2)).min(1.0)
 }
 
-/// An area-uniform point on a convex polygon for (u, v) ∈ [0,1)², keeping stratification.
+/// Cumulative areas of the fan triangles `(v[0], v[k], v[k+1])` of a convex polygon: what
+/// [`sample_polygon`] reads.
+pub fn fan_cdf(v: &[DVec3]) -> Vec<f64> {
+    let mut acc = 0.0;
+    (1..v.len() - 1)
+        .map(|k| {
+            acc += 0.5 * (v[k] - v[0]).cross(v[k + 1] - v[0]).length();
+            acc
+        })
+        .collect()
+}
+
+/// An area-uniform point on a convex polygon for (u, v) ∈ [0,1)², keeping stratification
+/// (`cdf`: [`fan_cdf`]).
 #[inline]
 pub fn sample_polygon(v: &[DVec3], cdf: &[f64], u: f64, w: f64) -> DVec3 {
     let total = *cdf.last().unwrap();
@@ -442,5 +449,21 @@ mod tests {
         let (h_below, _) = direct_irradiance_sampled(&scene, &rays, &ems, below, n, 0, &pts, &mut choice);
         let f = point_to_polygon(below, n, &scene.polygons[1].vertices, scene.polygons[1].normal);
         assert!(f > 0.0 && crate::luminance(h_below) > 0.0, "below the lamp: {h_below} (F = {f})");
+    }
+
+    #[test]
+    fn points_on_a_polygon_lie_inside_and_cover_it_evenly() {
+        // An L-shaped split is not convex; a unit square fan of two triangles is.
+        let sq = [DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y];
+        let mut rng = rng_for(1, 2);
+        let mut u = || rand::RngExt::random::<f64>(&mut rng);
+        let (mut left, m) = (0usize, 20_000);
+        for _ in 0..m {
+            let p = super::sample_polygon(&sq, &super::fan_cdf(&sq), u(), u());
+            assert!((0.0..=1.0).contains(&p.x) && (0.0..=1.0).contains(&p.y) && p.z == 0.0, "{p}");
+            left += usize::from(p.x < 0.5);
+        }
+        let f = left as f64 / m as f64;
+        assert!((f - 0.5).abs() < 0.02, "fraction in the left half {f}");
     }
 }

@@ -34,6 +34,7 @@ use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 use crate::accel::SceneRays;
 use rand::RngExt;
 
+use crate::direct::{fan_cdf, sample_polygon};
 use crate::sampling::{basis, cosine_hemisphere, rng_for};
 use crate::scene::{LightKind, Scene};
 
@@ -70,8 +71,9 @@ pub enum Side {
 
 /// A source of light paths: a point on it and a direction.
 enum Source {
-    /// An emitting polygon (its index), sampled by area over its fan of triangles.
-    Polygon(u32),
+    /// An emitting polygon (its index), sampled by area over its fan of triangles
+    /// ([`crate::direct::fan_cdf`]).
+    Polygon(u32, Vec<f64>),
     /// A point or spot light (all round).
     Point(DVec3),
     /// Light from far away: parallel rays going in `Some(direction)` (a sun, a directional
@@ -115,7 +117,7 @@ pub fn sides(scene: &Scene, rays: &SceneRays, open: &(dyn Fn(DVec3, DVec3, u32) 
             let p = &scene.polygons[q as usize];
             !p.back_side && p.area > 0.0 && scene.materials[p.material as usize].is_emitter()
         })
-        .map(Source::Polygon));
+        .map(|q| Source::Polygon(q, fan_cdf(&scene.polygons[q as usize].vertices))));
     for l in &scene.lights {
         if let LightKind::Point { position } | LightKind::Spot { position, .. } = l.kind {
             sources.push(Source::Point(position));
@@ -178,8 +180,10 @@ pub fn sides(scene: &Scene, rays: &SceneRays, open: &(dyn Fn(DVec3, DVec3, u32) 
             }
         })
         .collect();
+    if verdict.is_empty() {
+        return Vec::new();
+    }
     let mut sides = vec![Side::Winding; n];
-    let any = !verdict.is_empty();
     let mut by_root = vec![None; n];
     for (r, b, f) in verdict {
         by_root[r as usize] = Some((b, f));
@@ -190,11 +194,7 @@ pub fn sides(scene: &Scene, rays: &SceneRays, open: &(dyn Fn(DVec3, DVec3, u32) 
             sides[f] = sf;
         }
     }
-    if any {
-        sides
-    } else {
-        Vec::new()
-    }
+    sides
 }
 
 /// Hits per polygon side of `paths` light paths from `sources`, each path counted once
@@ -229,21 +229,18 @@ fn flood(
             }
         };
 
-        let (mut x, mut n, mut from) = match sources[i % sources.len()] {
-            Source::Polygon(q) => {
+        let source = &sources[i % sources.len()];
+        let (mut x, mut n, mut from) = match *source {
+            Source::Polygon(q, ref cdf) => {
                 let p = &scene.polygons[q as usize];
-                (point_on(&p.vertices, p.area, u(), u(), u()), p.normal, Some(q))
+                (sample_polygon(&p.vertices, cdf, u(), u()), p.normal, Some(q))
             }
             Source::Point(x) => (x, DVec3::ZERO, None),
             Source::Far(dir) => {
                 // A direction (the sky's: uniform over the sphere, kept where the sky that
                 // it comes from is lit), then a point on the disk across it that covers
                 // the scene's bounding sphere, started outside that sphere.
-                let d = dir.unwrap_or_else(|| {
-                    let (z, phi) = (1.0 - 2.0 * u(), std::f64::consts::TAU * u());
-                    let r = (1.0 - z * z).max(0.0).sqrt();
-                    DVec3::new(r * phi.cos(), r * phi.sin(), z)
-                });
+                let d = dir.unwrap_or_else(|| uniform_sphere(u(), u()));
                 if dir.is_none() && scene.lit_sky().is_none_or(|s| s.radiance_in(-d, 1e-3).max_element() <= 0.0) {
                     return;
                 }
@@ -260,17 +257,18 @@ fn flood(
                 }
             }
         };
-        if let (Some(open), Some(q), false) = (open, from, matches!(sources[i % sources.len()], Source::Far(_))) {
-            if !open(x, n, q) {
-                return;
+        // A far source's path has started (it met the scene); a light's must start in the air.
+        if !matches!(source, Source::Far(_)) {
+            if let (Some(open), Some(q)) = (open, from) {
+                if !open(x, n, q) {
+                    return;
+                }
             }
-        }
-        if !matches!(sources[i % sources.len()], Source::Far(_)) {
             started.fetch_add(1, Relaxed);
         }
         for _ in 0..BOUNCES {
             let dir = if n == DVec3::ZERO {
-                crate::sampling::fibonacci_sphere((u() * 1024.0) as u32, 1024)
+                uniform_sphere(u(), u())
             } else {
                 let (t, b) = basis(n);
                 let d = cosine_hemisphere(u(), u());
@@ -308,7 +306,7 @@ fn faces_closed_space(scene: &Scene, rays: &SceneRays, members: &[u32], id: u32)
         let q = members[((u() * members.len() as f64) as usize).min(members.len() - 1)];
         let p = &scene.polygons[q as usize];
         let (t, b) = basis(p.normal);
-        let x = point_on(&p.vertices, p.area, u(), u(), u()) + p.normal * (1e-7 * diag);
+        let x = sample_polygon(&p.vertices, &fan_cdf(&p.vertices), u(), u()) + p.normal * (1e-7 * diag);
         let d = cosine_hemisphere(u(), u());
         let dir = t * d.x + b * d.y + p.normal * d.z;
         rays.closest_facing(x.as_vec3(), dir.as_vec3(), f32::INFINITY, Some(q)).is_some()
@@ -368,39 +366,9 @@ fn surfaces(scene: &Scene, rays: &SceneRays) -> (Vec<u32>, Vec<(u32, Vec<u32>)>)
 /// Probes of [`faces_closed_space`] per surface.
 pub const CLOSED_PROBES: u32 = 32;
 
-/// A point uniform on the convex polygon `v` of area `area` (its fan of triangles from
-/// `v[0]`, one chosen by area with `s`, then uniform in it with `u1`, `u2`).
-fn point_on(v: &[DVec3], area: f64, s: f64, u1: f64, u2: f64) -> DVec3 {
-    let mut left = s * 2.0 * area;
-    let last = v.len() - 2;
-    for k in 1..=last {
-        let a = (v[k] - v[0]).cross(v[k + 1] - v[0]).length();
-        if left < a || k == last {
-            let (r, t) = (u1.sqrt(), u2);
-            return v[0] * (1.0 - r) + v[k] * (r * (1.0 - t)) + v[k + 1] * (r * t);
-        }
-        left -= a;
-    }
-    v[0]
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn points_on_a_polygon_lie_inside_and_cover_it_evenly() {
-        // An L-shaped split is not convex; a unit square fan of two triangles is.
-        let sq = [DVec3::ZERO, DVec3::X, DVec3::new(1.0, 1.0, 0.0), DVec3::Y];
-        let mut rng = rng_for(1, 2);
-        let mut u = || rng.random::<f64>();
-        let (mut left, m) = (0usize, 20_000);
-        for _ in 0..m {
-            let p = point_on(&sq, 1.0, u(), u(), u());
-            assert!((0.0..=1.0).contains(&p.x) && (0.0..=1.0).contains(&p.y) && p.z == 0.0, "{p}");
-            left += usize::from(p.x < 0.5);
-        }
-        let f = left as f64 / m as f64;
-        assert!((f - 0.5).abs() < 0.02, "fraction in the left half {f}");
-    }
+/// A direction uniform on the unit sphere for (u1, u2) ∈ [0,1)².
+fn uniform_sphere(u1: f64, u2: f64) -> DVec3 {
+    let (z, phi) = (1.0 - 2.0 * u1, std::f64::consts::TAU * u2);
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    DVec3::new(r * phi.cos(), r * phi.sin(), z)
 }
