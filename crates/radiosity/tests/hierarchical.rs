@@ -2427,6 +2427,30 @@ fn a_lamp_just_under_the_ceiling_keeps_a_closed_room_closed() {
     }
 }
 
+/// `scenes/lamp-under-ceiling.toml`: a closed two-sided room whose one-sided lamp faces
+/// up 1 cm under the ceiling, and a box lifted 1 cm off the floor. All the light reaches
+/// the room from the ceiling's spot above the lamp, through the 1 cm slit, grazing. The
+/// links' 8 visibility rays find a spot node's visible share only where it is large, and a
+/// link that every ray found hidden was dropped: the box read 23 % darker than the rows
+/// (0.0214 against 0.0279). Such links above the power tolerance take a second look
+/// (`form_factor::hierarchical::GLIMPSE`) before they are dropped.
+#[test]
+fn light_through_a_slit_reaches_the_room() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/lamp-under-ceiling.toml");
+    let desc = radiosity::scene::load(path.to_str().unwrap()).unwrap();
+    let scene = Scene::from_desc(desc).unwrap();
+    let solve = |transport| solve_scene(scene.clone(), &Settings { mesh_size: Some(0.05), transport, ..Default::default() }, &NoProgress).unwrap();
+    let (rows, hier) = (solve(Kind::Rows), solve(Kind::Hierarchical));
+    assert!(hier.transport.as_ref().unwrap().hierarchy().unwrap().stats.glimpsed > 0);
+    for (a, b) in rows.objects().iter().zip(hier.objects().iter()).filter(|(a, _)| a.name != "lamp") {
+        let e = b.radiance_rgb[1] / a.radiance_rgb[1] - 1.0;
+        eprintln!("{}: rows {:.4}, hierarchical {:.4} ({:+.2} %)", a.name, a.radiance_rgb[1], b.radiance_rgb[1], 100.0 * e);
+        // Measured 2026-12-08: box −23.3 %, room −2.7 % before; now −4.2 % and −0.3 %
+        // (seeds 0–3: box −1.1 to −4.2 %). Held to 6 %.
+        assert!(e.abs() < 0.06, "{}: {:+.2} % from the rows", a.name, 100.0 * e);
+    }
+}
+
 /// A room open at one side (five inward walls, two-sided, grey 0.5) with a lamp under its
 /// ceiling, turned so that no wall lies in an axis plane. A tilted wall's box has a
 /// thickness, so the refinement's box-against-plane tests did not find a wall's back copy

@@ -617,6 +617,9 @@ pub struct HierarchyStats {
     pub pairs_examined: u64,
     /// Node pairs subdivided because their visibility was partial.
     pub partial_refined: u64,
+    /// Of those, pairs that every visibility ray found hidden and more rays found partly
+    /// visible (light through a slit; `crate::form_factor::hierarchical::GLIMPSE`).
+    pub glimpsed: u64,
     /// Links between two nodes at the minimum size that are not well separated (their
     /// factor integrated point by point, see [`crate::form_factor::hierarchical`]).
     pub terminal_links: u64,
