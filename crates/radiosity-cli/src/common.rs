@@ -47,7 +47,9 @@ pub struct SolveFlags {
     #[arg(long, value_name = "X", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_SEPARATION)]
     pub link_separation: f64,
     /// Hierarchical: partially visible links carrying less than this fraction of the
-    /// scene's power are kept instead of refined (BF refinement).
+    /// scene's power are kept instead of refined (BF refinement); links above it that every
+    /// visibility ray finds hidden cast up to 32 times as many rays, more the more power
+    /// they carry, before they are dropped (0: every such link, the full 32 times).
     #[arg(long, value_name = "TOL", default_value_t = radiosity::form_factor::hierarchical::DEFAULT_TOLERANCE)]
     pub link_tolerance: f64,
     /// Hierarchical: rays per link that classify its visibility (partial links are refined).
