@@ -30,7 +30,10 @@
 //!   visibility is that of its light (a ceiling 0.01 above a lamp's back side holds most
 //!   of its node's light in a spot the lamp hides from the room; read by area, its links
 //!   carried that light past the lamp, and RenderPark's closed cube `--two-sided` created
-//!   2 % of its light, a small copy of it 5–6 %). (Widening θ for
+//!   2 % of its light, a small copy of it 5–6 %); so are a cluster source's, by its
+//!   exposed faces' `A·B̂` for a far pair (its reading weighs its faces by projected area,
+//!   so a spot hidden from the receiver was read in full: the cube created 0.8 %, now
+//!   0.16 %). (Widening θ for
 //!   low-power links, as BF refinement also allows, was measured: up to 2× halved the links
 //!   on the classroom but biased it 2.5 % dark);
 //! - the factor varies across a large receiver: each link carries its gradient (a plane
@@ -419,14 +422,16 @@ fn first_bounce_estimate(tree: &Tree, d: &crate::transport::SparseRows, reflecta
 }
 
 /// Prefix sums of `A·B̂` over the elements in tree order (`b_hat` per node; see
-/// [`Ctx::visibility`]).
-fn light_prefix(tree: &Tree, b_hat: &[f32]) -> Vec<f64> {
+/// [`Ctx::visibility`]), with `A` the exposed area (`Node::area_x`) when `exposed`.
+fn light_prefix(tree: &Tree, b_hat: &[f32], exposed: bool) -> Vec<f64> {
     let mut p = Vec::with_capacity(tree.order.len() + 1);
     let mut acc = 0.0;
     p.push(acc);
     for &e in &tree.order {
         let leaf = tree.leaf_of[e as usize] as usize;
-        acc += tree.nodes[leaf].area as f64 * b_hat[leaf].max(0.0) as f64;
+        let nd = &tree.nodes[leaf];
+        let a = if exposed { nd.area_x } else { nd.area };
+        acc += a as f64 * b_hat[leaf].max(0.0) as f64;
         p.push(acc);
     }
     p
@@ -535,6 +540,9 @@ struct Ctx<'a> {
     /// With the first bounce in `b_hat`: prefix sums of `A·B̂` over the elements in tree
     /// order, from which [`Ctx::visibility`] draws a surface source's points.
     light_prefix: Option<Vec<f64>>,
+    /// [`Ctx::light_prefix`] over exposed area (`area_x · B̂`): where a far cluster source's
+    /// visibility rays start (its light towards far nodes).
+    light_prefix_x: Option<Vec<f64>>,
     /// Per node: its elements emit unequally (such a cluster, e.g. a lamp with a dark
     /// housing, is never a source: its radiosity depends on direction more than the
     /// first-order directional reading follows).
@@ -674,6 +682,7 @@ pub fn link(
         rho,
         b_hat,
         light_prefix: None,
+        light_prefix_x: None,
         emits_any: e_range.iter().map(|r| r.1 > 0.0).collect(),
         sharp: emitting_area < SHARP_EMITTERS * area,
         lit: LitFaces::of_nodes(&tree, emission, &emits),
@@ -692,7 +701,8 @@ pub fn link(
     let direct_rays = total_rays.load(Ordering::Relaxed) - rays_before_direct;
     if let Some(d) = &direct_rows {
         ctx.b_hat = first_bounce_estimate(&tree, d, reflectance, emission, std::mem::take(&mut ctx.b_hat));
-        ctx.light_prefix = Some(light_prefix(&tree, &ctx.b_hat));
+        ctx.light_prefix = Some(light_prefix(&tree, &ctx.b_hat, false));
+        ctx.light_prefix_x = Some(light_prefix(&tree, &ctx.b_hat, true));
     }
     // Starting receivers: maximal surface nodes, split further so that no task holds more
     // than 1/256 of the elements (work for every thread).
@@ -1888,7 +1898,18 @@ impl Ctx<'_> {
         // lamp's back side holds most of a ceiling node's light in a spot the lamp hides
         // from the room; area-uniform rays rarely met that spot, the link was kept whole at
         // the ceiling's mean visibility, and it carried the spot's light past the lamp.
-        let light = self.light_prefix.as_deref().filter(|_| self.node(s).surface);
+        // A cluster source's likewise, over its exposed faces for a far pair: its reading
+        // weighs its faces by projected area, not by what the receiver sees of them, so a
+        // bright spot hidden from the receiver (the ceiling above a lamp) was read in full
+        // while area-drawn rays found the cluster visible. Closed rooms with such a spot
+        // created light (RenderPark's cube `--two-sided`: −0.80 % escaped, now −0.16 %).
+        let ns = self.node(s);
+        let prefix = if ns.surface || near { &self.light_prefix } else { &self.light_prefix_x };
+        let light = prefix.as_deref().filter(|p| {
+            // Nothing lit (or nothing exposed) there: area-drawn, as without an estimate.
+            let (a, b) = (ns.first as usize, (ns.first + ns.count) as usize);
+            ns.surface || p[b] > p[a]
+        });
         let pick_s = |k: u32, u: f64| match light {
             Some(p) => &self.samples[self.tree.slot_by(p, k, u)],
             None => pick(k, u),
@@ -2178,6 +2199,7 @@ mod tests {
             rho: vec![0.5; n],
             b_hat: vec![1.0; n],
             light_prefix: None,
+            light_prefix_x: None,
             emits: vec![false; n],
             emits_any: vec![false; n],
             lit: vec![LitFaces::NONE; n],
