@@ -538,7 +538,8 @@ struct Ctx<'a> {
     /// `ρ·D·E` once the direct columns `D` are known), max channel.
     b_hat: Vec<f32>,
     /// With the first bounce in `b_hat`: prefix sums of `A·B̂` over the elements in tree
-    /// order, from which [`Ctx::visibility`] draws a surface source's points.
+    /// order, from which [`Ctx::visibility`] draws a surface source's points (and a cluster
+    /// source's for a near pair).
     light_prefix: Option<Vec<f64>>,
     /// [`Ctx::light_prefix`] over exposed area (`area_x · B̂`): where a far cluster source's
     /// visibility rays start (its light towards far nodes).
@@ -1645,6 +1646,9 @@ impl Ctx<'_> {
             // seat under a desk): handed to every face alike it lit the hidden ones as the
             // exposed ones, and the two-sided classroom came out 6.6 % brighter than the
             // ray-traced stochastic solve, light created (1.6 % once split).
+            // No second look here (`Ctx::glimpse`): a cluster's hidden pair split into its
+            // faces handed light to faces of the cluster that see nothing of the source;
+            // measured, it made a closed room create 0.38 % (BENCHMARKS.md, round 24).
             let (v, partial) = self.visibility(r, s, power <= self.power_eps, near, !terminal, rng, c);
             if terminal || !partial {
                 if v > 0.0 {
